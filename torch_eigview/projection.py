@@ -1,0 +1,223 @@
+"""The frozen PCA projection layer: views to eigenspace coordinates and back.
+
+``EigenProjection`` holds what ``Eigenspace.fit`` learned (the mean view and the
+eigenvectors) as buffers, so ``.to()``, ``.double()``, ``state_dict``, pickling and ONNX
+export treat them as constants. Its ``forward`` is a subtraction and a matrix product:
+nothing data-dependent, nothing solved at inference time.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from torch import nn
+
+from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
+
+__all__ = ["EigenProjection"]
+
+
+def _as_image_shape(image_shape: object, n_features: int, name: str) -> tuple[int, int, int] | None:
+    """Validates an optional ``(C, H, W)`` whose product must be ``n_features``."""
+    if image_shape is None:
+        return None
+    if not isinstance(image_shape, (tuple, list, torch.Size)) or len(image_shape) != 3:
+        raise TypeError(f"{name} must be None or a (C, H, W) tuple of 3 ints, got {image_shape!r}")
+    if any(isinstance(v, bool) or not isinstance(v, int) for v in image_shape):
+        raise TypeError(f"{name} must hold ints, got {image_shape!r}")
+    shape = (int(image_shape[0]), int(image_shape[1]), int(image_shape[2]))
+    if min(shape) < 1 or math.prod(shape) != n_features:
+        raise ValueError(
+            f"{name}={shape} must be positive with C*H*W equal to the {n_features} features, "
+            f"got C*H*W={math.prod(shape)}"
+        )
+    return shape
+
+
+class EigenProjection(nn.Module):
+    """Projects views onto a frozen eigenspace: ``z = (vec(x) - mean) @ components.T``.
+
+    All state lives in persistent buffers (``mean``, ``components``, ``eigenvalues``);
+    the module has no parameters. Inputs must have the buffers' dtype: convert the module
+    with ``.to(dtype)`` or ``.double()`` rather than relying on implicit casts.
+
+    Args:
+        mean: (N,) the mean view, N = C*H*W (row-major flatten of (C, H, W)).
+        components: (k, N) orthonormal eigenvectors, one per row.
+        eigenvalues: (k,) eigenvalues of the centred scatter matrix, as in
+            ``Eigenspace.eigenvalues_``. Optional; when omitted the buffer is an empty
+            (0,) tensor, meaning "unknown" (the projection never uses it).
+        image_shape: (C, H, W) of a view, or None. With it, ``reconstruct`` returns images.
+            It is saved in ``state_dict`` as extra state, so loading restores it.
+        unit_norm: divide each input view by its L2 norm before projecting (the brightness
+            normalization of Murase and Nayar's appearance eigenspaces); the eigenspace
+            must then have been fitted on unit-norm views. Saved as extra state too.
+
+    Raises:
+        TypeError: a tensor argument is not a floating tensor, or the dtypes differ.
+        ValueError: shapes are inconsistent, values are not finite, or ``image_shape``
+            does not multiply to N.
+
+    Example:
+        >>> m = EigenProjection(torch.zeros(6), torch.eye(6)[:2], image_shape=(1, 2, 3))
+        >>> m(torch.ones(4, 1, 2, 3)).shape
+        torch.Size([4, 2])
+    """
+
+    mean: torch.Tensor
+    components: torch.Tensor
+    eigenvalues: torch.Tensor
+
+    def __init__(
+        self,
+        mean: torch.Tensor,
+        components: torch.Tensor,
+        eigenvalues: torch.Tensor | None = None,
+        image_shape: tuple[int, int, int] | None = None,
+        unit_norm: bool = False,
+    ) -> None:
+        super().__init__()
+        if not isinstance(unit_norm, bool):
+            raise TypeError(f"unit_norm must be a bool, got {type(unit_norm).__name__}")
+        self.unit_norm = unit_norm
+        check_float_tensor(mean, "mean")
+        check_float_tensor(components, "components")
+        check_ndim(mean, "mean", (1,), "(N,)")
+        check_ndim(components, "components", (2,), "(k, N)")
+        n_components, n_features = components.shape
+        if n_components < 1 or n_features < 1:
+            raise ValueError(f"components must have shape (k, N), k, N >= 1, got {tuple(components.shape)}")
+        if mean.shape[0] != n_features:
+            raise ValueError(
+                f"mean must have shape ({n_features},) to match components of shape "
+                f"{tuple(components.shape)}, got {tuple(mean.shape)}"
+            )
+        if components.dtype != mean.dtype:
+            raise TypeError(f"components must have dtype {mean.dtype} like mean, got {components.dtype}")
+        if eigenvalues is None:
+            eigenvalues = mean.new_empty(0)
+        else:
+            check_float_tensor(eigenvalues, "eigenvalues")
+            if tuple(eigenvalues.shape) != (n_components,):
+                raise ValueError(
+                    f"eigenvalues must have shape ({n_components},), one per component, "
+                    f"got {tuple(eigenvalues.shape)}"
+                )
+            if eigenvalues.dtype != mean.dtype:
+                raise TypeError(
+                    f"eigenvalues must have dtype {mean.dtype} like mean, got {eigenvalues.dtype}"
+                )
+        for tensor, name in ((mean, "mean"), (components, "components"), (eigenvalues, "eigenvalues")):
+            check_finite(tensor, name)
+        self.image_shape = _as_image_shape(image_shape, n_features, "image_shape")
+        # Copies, so that later in-place edits of the caller's tensors cannot reach the layer.
+        self.register_buffer("mean", mean.detach().clone())
+        self.register_buffer("components", components.detach().clone())
+        self.register_buffer("eigenvalues", eigenvalues.detach().clone().to(components.device))
+
+    @property
+    def in_features(self) -> int:
+        """N, the number of values in one view."""
+        return self.components.shape[1]
+
+    @property
+    def n_components(self) -> int:
+        """k, the dimension of the eigenspace."""
+        return self.components.shape[0]
+
+    def _layout(self) -> str:
+        n = self.in_features
+        if self.image_shape is None:
+            return f"(B, {n}) or (B, C, H, W) with C*H*W = {n}"
+        return f"(B, {n}) or (B, {', '.join(map(str, self.image_shape))})"
+
+    def _check_views(self, x: torch.Tensor) -> None:
+        # Static checks only (ndim, trailing sizes, dtype): torch.export and torch.compile
+        # evaluate them once and never on data. torch.jit.trace cannot record Python checks
+        # (its sizes are tensors, so they would only emit TracerWarnings): skip them there.
+        if torch.jit.is_tracing():
+            return
+        if not isinstance(x, torch.Tensor):
+            raise TypeError(f"x must be a torch.Tensor, got {type(x).__name__}")
+        if x.ndim not in (2, 4):
+            raise ValueError(f"x must have shape {self._layout()}, got shape {tuple(x.shape)}")
+        trailing = tuple(x.shape[1:])
+        if x.ndim == 4 and self.image_shape is not None:
+            ok = trailing == self.image_shape
+        else:
+            ok = math.prod(trailing) == self.in_features
+        if not ok:
+            raise ValueError(f"x must have shape {self._layout()}, got shape {tuple(x.shape)}")
+        if x.dtype != self.mean.dtype:
+            raise TypeError(
+                f"x must have the dtype of the layer's buffers ({self.mean.dtype}), got {x.dtype}; "
+                "convert the input or the layer with .to(dtype)"
+            )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Projects a batch of views onto the eigenspace.
+
+        Args:
+            x: (B, C, H, W) or (B, N) views, with the buffers' dtype and device.
+
+        Returns:
+            (B, k) eigenspace coordinates. Differentiable with respect to ``x``.
+
+        Raises:
+            ValueError: ``x`` does not have one of the accepted shapes.
+            TypeError: ``x`` is not a tensor of the buffers' dtype.
+        """
+        self._check_views(x)
+        return (self.prepare(x) - self.mean) @ self.components.T
+
+    def prepare(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, ...) views → (B, N) vectors as the eigenspace sees them (flattened, unit norm if set)."""
+        v = x.flatten(1)
+        if self.unit_norm:
+            v = v / v.norm(dim=1, keepdim=True).clamp_min(torch.finfo(v.dtype).tiny)
+        return v
+
+    def reconstruct(self, z: torch.Tensor) -> torch.Tensor:
+        """Maps eigenspace coordinates back to views: ``z @ components + mean``.
+
+        Args:
+            z: (B, k) coordinates, with the buffers' dtype.
+
+        Returns:
+            (B, C, H, W) when ``image_shape`` is known, else (B, N).
+
+        Raises:
+            ValueError: ``z`` is not (B, k).
+            TypeError: ``z`` is not a tensor of the buffers' dtype.
+        """
+        if not isinstance(z, torch.Tensor):
+            raise TypeError(f"z must be a torch.Tensor, got {type(z).__name__}")
+        if z.ndim != 2 or z.shape[1] != self.n_components:
+            raise ValueError(f"z must have shape (B, {self.n_components}), got shape {tuple(z.shape)}")
+        if z.dtype != self.mean.dtype:
+            raise TypeError(f"z must have the dtype of the buffers ({self.mean.dtype}), got {z.dtype}")
+        views = z @ self.components + self.mean
+        if self.image_shape is None:
+            return views
+        return views.unflatten(1, self.image_shape)
+
+    def get_extra_state(self) -> dict[str, Any]:
+        """Saves ``image_shape`` in ``state_dict`` (it is not a tensor, so not a buffer)."""
+        return {"image_shape": self.image_shape, "unit_norm": self.unit_norm}
+
+    def set_extra_state(self, state: Any) -> None:
+        """Restores ``image_shape`` from ``state_dict``, checking it against ``in_features``."""
+        if not isinstance(state, dict) or "image_shape" not in state:
+            raise ValueError(f"extra state must be a dict with key 'image_shape', got {state!r}")
+        self.image_shape = _as_image_shape(state["image_shape"], self.in_features, "image_shape")
+        self.unit_norm = bool(state.get("unit_norm", False))
+
+    def extra_repr(self) -> str:
+        text = f"in_features={self.in_features}, n_components={self.n_components}"
+        if self.image_shape is not None:
+            text += f", image_shape={self.image_shape}"
+        if self.unit_norm:
+            text += ", unit_norm=True"
+        return text

@@ -1,0 +1,140 @@
+"""From a few seed views of one object to its dense set of views (Secs. 3 and 4.1).
+
+The seed views are at 0, α, 2α, … (degrees). Each consecutive pair synthesizes the novel
+angles of its own sector: angles below α come from the first pair, angles at or above
+(m − 1)·α… from the last pair, with the pair's own angles as reference, so A is the
+concatenation [G1C1 … G(m−1)C(m−1)] of Sec. 4.1 in its direct form.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import torch
+
+from torch_eigview.cameras import estimate_elevation
+from torch_eigview.correspondence import estimate_correspondence
+from torch_eigview.errors import as_angle_tensor, check_alpha, check_finite, check_float_tensor, check_ndim
+from torch_eigview.normalize import foreground_mask, normalize_extent
+from torch_eigview.warp import NovelViewWarp
+
+__all__ = ["SynthesisOptions", "SynthesizedViews", "synthesize_views"]
+
+
+@dataclass(frozen=True)
+class SynthesisOptions:
+    """How seed views become novel views.
+
+    Attributes:
+        flow: scikit-image flow for the correspondences, ``"tvl1"`` or ``"ilk"``.
+        threshold: forward–backward consistency tolerance in pixels.
+        elevation: camera elevation in degrees (0: the paper's orthographic camera, rows
+            stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow.
+        extent: size-normalize each synthesized view as the data set's images are
+            (:func:`~torch_eigview.normalize.normalize_extent`; COIL's processed set is).
+        background: intensity below which a pixel is background (for ``extent`` and the
+            elevation fit).
+        center: column of the rotation axis, default the image's centre column.
+        max_stretch: see :class:`~torch_eigview.warp.NovelViewWarp`.
+    """
+
+    flow: str = "tvl1"
+    threshold: float = 1.0
+    elevation: float | str = "auto"
+    extent: bool = True
+    background: float = 0.05
+    center: float | None = None
+    max_stretch: float = 3.0
+
+    def __post_init__(self) -> None:
+        if self.flow not in ("tvl1", "ilk"):
+            raise ValueError(f"flow must be 'tvl1' or 'ilk', got {self.flow!r}")
+        if isinstance(self.elevation, str) and self.elevation != "auto":
+            raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
+        if not self.threshold > 0:
+            raise ValueError(f"threshold={self.threshold} must be positive")
+
+
+@dataclass
+class SynthesizedViews:
+    """The views of one object.
+
+    Attributes:
+        views: (T, C, H, W) synthesized views.
+        thetas: (T,) their angles in degrees from the first seed view.
+        elevations: one elevation (degrees) per seed pair.
+        seconds: time spent in ``"correspondence"`` and ``"synthesis"``.
+    """
+
+    views: torch.Tensor
+    thetas: torch.Tensor
+    elevations: list[float]
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _pair_of(thetas: torch.Tensor, alpha: float, n_pairs: int) -> torch.Tensor:
+    """Index of the seed pair whose sector holds each angle."""
+    return torch.clamp(torch.floor(thetas / alpha), 0, n_pairs - 1).long()
+
+
+def synthesize_views(
+    seeds: torch.Tensor,
+    alpha: float,
+    thetas: object,
+    options: SynthesisOptions | None = None,
+) -> SynthesizedViews:
+    """Synthesizes the views of one object at ``thetas`` from seed views 0, α, 2α, ….
+
+    Args:
+        seeds: (V, C, H, W) seed views, V >= 2, at angles 0, α, …, (V − 1)·α.
+        alpha: angle between consecutive seed views in degrees.
+        thetas: (T,) novel angles in degrees from the first seed view.
+        options: :class:`SynthesisOptions`.
+
+    Returns:
+        :class:`SynthesizedViews` with views in the order of ``thetas``.
+    """
+    opts = options or SynthesisOptions()
+    seeds = check_float_tensor(seeds, "seeds")
+    check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
+    if seeds.shape[0] < 2:
+        raise ValueError(f"seeds must hold at least 2 views, got V={seeds.shape[0]}")
+    check_finite(seeds, "seeds")
+    alpha = check_alpha(alpha)
+    if abs(alpha) * (seeds.shape[0] - 1) >= 180:
+        raise ValueError(f"alpha={alpha} with {seeds.shape[0]} seed views spans 180 degrees or more")
+    theta = as_angle_tensor(thetas, "thetas")
+    n_pairs = seeds.shape[0] - 1
+    pair = _pair_of(theta, alpha, n_pairs)
+    out = seeds.new_empty((theta.numel(), *seeds.shape[1:]))
+    seconds = {"correspondence": 0.0, "synthesis": 0.0}
+    elevations: list[float] = []
+    for n in range(n_pairs):
+        v1, v2 = seeds[n : n + 1], seeds[n + 1 : n + 2]
+        t0 = time.perf_counter()
+        corr = estimate_correspondence(v1, v2, method=opts.flow, threshold=opts.threshold)
+        elevation = opts.elevation
+        if elevation == "auto":
+            mask = foreground_mask(v1, opts.background)
+            elevation = float(estimate_elevation(corr, alpha, center=opts.center, mask=mask)[0])
+            if not math.isfinite(elevation):
+                elevation = 0.0
+        elevations.append(float(elevation))
+        t1 = time.perf_counter()
+        seconds["correspondence"] += t1 - t0
+        sel = (pair == n).nonzero().flatten()
+        if sel.numel() == 0:
+            continue
+        warp = NovelViewWarp(alpha, opts.center, max_stretch=opts.max_stretch, elevation=float(elevation))
+        maps = warp.maps(corr, theta[sel] - n * alpha)
+        pair_seeds = torch.stack([v1, v2])  # (S=2, B=1, C, H, W)
+        views = warp.apply_maps(maps, pair_seeds)[0]
+        if opts.extent:
+            fg = foreground_mask(pair_seeds, opts.background).to(seeds.dtype)[:, :, None]
+            masks = warp.apply_maps(maps, fg)[0, :, 0] > 0.5
+            views = normalize_extent(views, masks)
+        out[sel] = views
+        seconds["synthesis"] += time.perf_counter() - t1
+    return SynthesizedViews(out, theta, elevations, seconds)

@@ -1,0 +1,400 @@
+"""Novel-view synthesis for the orthographic camera: forward maps, their inverse, the warp.
+
+Convention:
+    Images are (C, H, W) (batched (B, C, H, W)); x is the column, y the row; pixel
+    centres are at integer coordinates. Rows never mix (the camera rotates about the
+    vertical axis), so every map here is a map along rows: ``dst_x_for_src`` (forward,
+    Eq. 2) gives the target column of each source pixel, ``src_x_for_dst`` (inverse) the
+    source column sampled by each target pixel. Maps are in pixels, not normalized, and
+    are handed to :func:`kornia.geometry.transform.remap` with ``align_corners=True``.
+
+The synthesized view is linear in the seed images: bilinear (tent, Eq. 4) sampling with
+weights that depend only on the correspondences, blended over the two seed views with
+weights that also depend only on the correspondences. :mod:`torch_eigview.operator`
+builds the same linear map as the sparse product G·C of Eqs. 3–6.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from kornia.geometry.transform import remap
+
+from torch_eigview.cameras import orthographic_coefficients
+from torch_eigview.correspondence import Correspondence
+from torch_eigview.errors import as_angle_tensor, check_alpha, check_float_tensor, check_ndim
+
+__all__ = ["NovelViewWarp", "WarpMaps", "fill_row_holes", "invert_row_map"]
+
+
+@dataclass(frozen=True)
+class WarpMaps:
+    """Target→source maps and blend weights for T novel views of B objects.
+
+    Attributes:
+        src_x: (S, B, T, H, W) source column in seed view s for each target pixel.
+        weight: (S, B, T, H, W) blend weight of seed view s (they sum to 1 per pixel).
+        hit: (S, B, T, H, W) bool, True where seed view s sees the target pixel.
+        thetas: (T,) novel angles in degrees.
+        src_y: (S, B, T, H, W) source row, or None when every target pixel samples its
+            own row (the camera axis is perpendicular to the rotation axis: a pure row warp).
+    """
+
+    src_x: torch.Tensor
+    weight: torch.Tensor
+    hit: torch.Tensor
+    thetas: torch.Tensor
+    src_y: torch.Tensor | None = None
+
+    @property
+    def n_sources(self) -> int:
+        return self.src_x.shape[0]
+
+
+def invert_row_map(
+    dst_x_for_src: torch.Tensor,
+    valid: torch.Tensor,
+    depth: torch.Tensor | None,
+    max_stretch: float = math.inf,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Inverts a forward map along rows: the source column sampled by each target pixel.
+
+    Each pair of neighbouring valid source pixels (k, k + 1) whose targets keep their
+    order and lie at most ``max_stretch`` pixels apart is a segment mapped linearly onto
+    the target row; every integer target column it covers takes the linearly inverted
+    source column. Segments whose order flips are surface turned away from the novel
+    camera; where segments overlap the one nearest the camera (largest ``depth``) wins,
+    like a z-buffer.
+
+    Args:
+        dst_x_for_src: (B, T, H, W) forward map x3(x1) in pixels.
+        valid: (B, H, W) bool, source pixels with a trusted correspondence.
+        depth: (B, T, H, W) depth towards the novel camera, or None (ties: largest source x).
+        max_stretch: longest segment (target pixels) still taken as one surface.
+
+    Returns:
+        ``(src_x_for_dst, hit)``, (B, T, H, W) each; ``src_x_for_dst`` is NaN where
+        ``hit`` is False.
+    """
+    b, t, h, w = dst_x_for_src.shape
+    dtype, device = dst_x_for_src.dtype, dst_x_for_src.device
+    f0, f1 = dst_x_for_src[..., :-1], dst_x_for_src[..., 1:]
+    length = f1 - f0
+    seg_ok = (valid[:, None, :, :-1] & valid[:, None, :, 1:]) & (length > 0) & (length <= max_stretch)
+    out = torch.full((b * t * h * w,), math.nan, dtype=dtype, device=device)
+    hit = torch.zeros(b * t * h * w, dtype=torch.bool, device=device)
+    if w < 2 or not bool(seg_ok.any()):
+        return out.view(b, t, h, w), hit.view(b, t, h, w)
+    n_max = math.ceil(float(length[seg_ok].max())) + 1
+    steps = torch.arange(n_max, dtype=dtype, device=device)
+    first = torch.ceil(f0)
+    # candidate target columns of each segment: (B, T, H, W - 1, n_max)
+    cols = first[..., None] + steps
+    ok = seg_ok[..., None] & (cols <= f1[..., None]) & (cols >= 0) & (cols <= w - 1)
+    frac = (cols - f0[..., None]) / length.clamp_min(torch.finfo(dtype).tiny)[..., None]
+    k = torch.arange(w - 1, dtype=dtype, device=device)[:, None]
+    src = k + frac
+    if depth is None:
+        key = src
+    else:
+        d0, d1 = depth[..., :-1, None], depth[..., 1:, None]
+        key = d0 + (d1 - d0) * frac
+    row = torch.arange(b * t * h, device=device).view(b, t, h, 1, 1) * w
+    idx = (row + cols.clamp(0, w - 1).long())[ok]
+    key, src = key[ok], src[ok]
+    best = torch.full((b * t * h * w,), -math.inf, dtype=dtype, device=device)
+    best.scatter_reduce_(0, idx, key, reduce="amax")
+    win = key >= best[idx]
+    out.scatter_reduce_(0, idx[win], src[win], reduce="amax", include_self=False)
+    hit[idx] = True
+    return out.view(b, t, h, w), hit.view(b, t, h, w)
+
+
+def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
+    """Fills non-hit target pixels by interpolating the map between hits along the row.
+
+    Beyond the last hit of a row the fallback map, shifted to meet that hit, continues
+    it; a row with no hit takes the fallback map.
+    """
+    w = src.shape[-1]
+    cols = torch.arange(w, device=src.device).expand_as(hit)
+    prev = torch.where(hit, cols, -1).cummax(dim=-1).values
+    nxt = torch.where(hit, cols, w).flip(-1).cummin(dim=-1).values.flip(-1)
+    has_prev, has_next = prev >= 0, nxt < w
+    p, n = prev.clamp(0, w - 1), nxt.clamp(0, w - 1)
+    sp, sn = src.gather(-1, p), src.gather(-1, n)
+    fp, fn = fallback.gather(-1, p), fallback.gather(-1, n)
+    span = (n - p).clamp_min(1).to(src.dtype)
+    between = sp + (sn - sp) * (cols - p).to(src.dtype) / span
+    left_only = fallback + (sp - fp)
+    right_only = fallback + (sn - fn)
+    filled = torch.where(has_prev & has_next, between, torch.where(has_prev, left_only, right_only))
+    filled = torch.where(has_prev | has_next, filled, fallback)
+    return torch.where(hit, src, filled)
+
+
+def _sample(field: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Bilinear samples of ``field`` (B, T, H, W) at pixel coordinates ``x``, ``y`` (B, T, H, W)."""
+    b, t, h, w = field.shape
+    out = remap(
+        field.reshape(b * t, 1, h, w),
+        x.reshape(b * t, h, w),
+        y.reshape(b * t, h, w),
+        padding_mode="border",
+        align_corners=True,
+    )
+    return out.view(b, t, h, w)
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    """Eq. 2 / Eq. 7 for one batch of novel angles, shared by both seed views.
+
+    The tilted orthographic camera: a point (X, Y, Z), X from the rotation axis, is seen
+    at ``x - c = X cos(phi) + Z sin(phi)`` and ``y = K(Y) - tilt * (Z cos(phi) - X sin(phi))``
+    with ``tilt = sin(elevation)``; tilt 0 is the paper's orthographic camera, for which
+    rows do not move. x follows Eq. 2 whatever the tilt.
+    """
+
+    a: torch.Tensor  # (1, T, 1, 1)
+    b: torch.Tensor
+    theta: torch.Tensor  # (1, T, 1, 1) radians
+    c: float
+    alpha: float  # radians
+    sign: torch.Tensor  # (B, 1, 1, 1)
+    max_stretch: float
+    tilt: float
+
+    def source_maps(
+        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, second: bool
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
+        in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
+        c, al, th = self.c, self.alpha, self.theta
+        big_x = (x1 - c)[:, None]
+        big_z = ((x2 - c)[:, None] - big_x * math.cos(al)) / math.sin(al)
+        dst_x_for_src = c + self.a * (x1 - c)[:, None] + self.b * (x2 - c)[:, None]
+        depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch)
+        # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
+        scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
+        cols = torch.arange(x1.shape[-1], dtype=x1.dtype, device=x1.device)
+        src_x = fill_row_holes(src_x, hit, (c + (cols - c) * scale).expand_as(src_x))
+        if self.tilt == 0.0:
+            return src_x, None, hit
+        phi = al if second else 0.0
+        dy = -self.tilt * (big_z * (torch.cos(th) - math.cos(phi)) - big_x * (torch.sin(th) - math.sin(phi)))
+        grid = x2 if second else x1
+        return _refine_2d(src_x, dst_x_for_src - grid[:, None], dy, valid)
+
+
+def _refine_2d(
+    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 10
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Inverts the 2D forward map p -> p + (dx, dy)(p) by fixed-point iteration.
+
+    Starts from the row-wise inverse ``src_x``; a target pixel is a hit when the iteration
+    lands on a valid source pixel that maps back to within half a pixel.
+    """
+    b, t, h, w = dx.shape
+    xx = torch.arange(w, dtype=dx.dtype, device=dx.device).expand(b, t, h, w)
+    yy = torch.arange(h, dtype=dx.dtype, device=dx.device).view(h, 1).expand(b, t, h, w)
+    sx = src_x
+    sy = yy - _sample(dy, sx, yy)
+    for _ in range(iters):
+        sx = xx - _sample(dx, sx, sy)
+        sy = yy - _sample(dy, sx, sy)
+    res = (sx + _sample(dx, sx, sy) - xx).abs() + (sy + _sample(dy, sx, sy) - yy).abs()
+    ok = _sample(valid[:, None].to(dx.dtype).expand(b, t, h, w), sx, sy) > 0.999
+    inside = (sx >= 0) & (sx <= w - 1) & (sy >= 0) & (sy <= h - 1)
+    return sx, sy, ok & inside & (res < 0.5)
+
+
+class NovelViewWarp(torch.nn.Module):
+    """Synthesizes the views I_θ of an object from one or two seed views (Sec. 3).
+
+    The seed views are at angles 0 and ``alpha`` (degrees); a novel view at ``theta`` is
+    Eq. 2 with Eq. 7's coefficients, ``x3 - c = a (x1 - c) + b (x2 - c)``, where ``c`` is
+    the column of the rotation axis. The forward map of each seed view is inverted
+    (:func:`invert_row_map`) and the seed images are sampled with kornia's ``remap``
+    (bilinear: the tent weights of Eq. 4). With two seed views both are warped and
+    blended: where both see a target pixel the nearer view in angle weighs more, where
+    only one does (an occlusion in the other) that one is used alone.
+
+    Args:
+        alpha: angle of the second seed view in degrees.
+        center: column ``c`` of the rotation axis; default ``(W - 1) / 2``.
+        max_stretch: a forward-map segment longer than this (pixels) is a depth jump,
+            not a surface: it is left to the other view.
+        depth_sign: +1 or -1 picks which way depth points towards the camera; ``"auto"``
+            decides per object from the correspondences (the visible surface lies in
+            front of the rotation axis on average).
+        elevation: tilt of the camera's axis out of the plane perpendicular to the
+            rotation axis, in degrees (0: the paper's orthographic camera, rows stay rows).
+            With a tilt, points also move vertically (``y = K - sin(elevation) (Z cos(phi)
+            - X sin(phi))``) and the maps become 2D; :func:`estimate_elevation` measures
+            it from a 2D flow (COIL's camera looks down on the turntable).
+
+    Example:
+        >>> warp = NovelViewWarp(alpha=5.0)
+        >>> view1 = torch.rand(1, 1, 8, 8); corr = correspondence_from_disparity(torch.zeros(8, 8))
+        >>> warp(view1, None, correspondence=corr, thetas=[0.0, 2.5]).shape
+        torch.Size([1, 2, 1, 8, 8])
+    """
+
+    def __init__(
+        self,
+        alpha: float,
+        center: float | None = None,
+        *,
+        max_stretch: float = 3.0,
+        depth_sign: float | str = "auto",
+        elevation: float = 0.0,
+    ) -> None:
+        super().__init__()
+        self.alpha = check_alpha(alpha)
+        if center is not None and not math.isfinite(float(center)):
+            raise ValueError(f"center={center} must be a finite column")
+        self.center = None if center is None else float(center)
+        if not max_stretch > 0:
+            raise ValueError(f"max_stretch={max_stretch} must be positive")
+        self.max_stretch = float(max_stretch)
+        if depth_sign not in ("auto", 1, -1, 1.0, -1.0):
+            raise ValueError(f"depth_sign must be 'auto', 1 or -1, got {depth_sign!r}")
+        self.depth_sign = depth_sign
+        if not (math.isfinite(float(elevation)) and abs(float(elevation)) < 90):
+            raise ValueError(f"elevation={elevation} must be an angle in degrees in (-90, 90)")
+        self.elevation = float(elevation)
+
+    def extra_repr(self) -> str:
+        return (
+            f"alpha={self.alpha}, center={self.center}, elevation={self.elevation}, "
+            f"max_stretch={self.max_stretch}"
+        )
+
+    def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
+        """Target→source maps and blend weights for the novel angles ``thetas``.
+
+        Args:
+            correspondence: (B, H, W) correspondences between the seed views.
+            thetas: (T,) novel angles in degrees from the first seed view.
+            n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
+
+        Returns:
+            :class:`WarpMaps` with S = ``n_sources``; ``src_y`` is None unless the camera
+            has an elevation.
+        """
+        if n_sources not in (1, 2):
+            raise ValueError(f"n_sources must be 1 or 2, got {n_sources}")
+        d12 = correspondence.disparity_12
+        dtype, device = d12.dtype, d12.device
+        theta = as_angle_tensor(thetas, "thetas")
+        a, b = (
+            v.to(dtype=dtype, device=device).view(1, -1, 1, 1)
+            for v in orthographic_coefficients(theta, self.alpha)
+        )
+        th = torch.deg2rad(theta).to(dtype=dtype, device=device).view(1, -1, 1, 1)
+        _, _, w = correspondence.shape
+        c = (w - 1) / 2 if self.center is None else self.center
+        cols = torch.arange(w, dtype=dtype, device=device).expand_as(d12)
+        sign = self._depth_sign(cols - c, cols + d12 - c, correspondence.valid_12)
+        geo = _Geometry(a, b, th, c, math.radians(self.alpha), sign, self.max_stretch, self._tilt)
+        # Source view 1: x1 is the pixel grid, x2 its match. Source view 2: the other way.
+        src1, srcy1, hit1 = geo.source_maps(cols, cols + d12, correspondence.valid_12, second=False)
+        if n_sources == 1:
+            sy = None if srcy1 is None else srcy1[None]
+            return WarpMaps(src1[None], torch.ones_like(src1)[None], hit1[None], theta, sy)
+        src2, srcy2, hit2 = geo.source_maps(
+            cols + correspondence.disparity_21, cols, correspondence.valid_21, second=True
+        )
+        # Where both views see a pixel the nearer one in angle weighs more; where one is
+        # occluded the other is used alone; where neither sees it, the angular weights.
+        lam2 = (th / math.radians(self.alpha)).clamp(0, 1)
+        both, neither = hit1 & hit2, ~hit1 & ~hit2
+        w1 = torch.where(both | neither, (1 - lam2).expand_as(src1), hit1.to(dtype))
+        src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
+        return WarpMaps(
+            torch.stack([src1, src2]), torch.stack([w1, 1 - w1]), torch.stack([hit1, hit2]), theta, src_y
+        )
+
+    @property
+    def _tilt(self) -> float:
+        return math.sin(math.radians(self.elevation))
+
+    def _depth_sign(self, xa: torch.Tensor, xb: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        """(B, 1, 1, 1) sign that makes depth point towards the camera."""
+        if self.depth_sign != "auto":
+            return torch.full(
+                (xa.shape[0], 1, 1, 1), float(self.depth_sign), dtype=xa.dtype, device=xa.device
+            )
+        al = math.radians(self.alpha)
+        z = (xb - xa * math.cos(al)) / math.sin(al)
+        mean_z = (z * valid).sum(dim=(-1, -2)) / valid.sum(dim=(-1, -2)).clamp_min(1)
+        return torch.where(mean_z >= 0, 1.0, -1.0).to(xa.dtype).view(-1, 1, 1, 1)
+
+    @staticmethod
+    def apply_maps(maps: WarpMaps, views: torch.Tensor) -> torch.Tensor:
+        """Samples and blends the seed views with precomputed maps.
+
+        Args:
+            maps: :class:`WarpMaps` with S sources for B objects and T angles.
+            views: (S, B, C, H, W) seed images.
+
+        Returns:
+            (B, T, C, H, W) synthesized views.
+        """
+        s, b, t, h, w = maps.src_x.shape
+        c = views.shape[2]
+        rows = torch.arange(h, dtype=views.dtype, device=views.device).view(1, h, 1).expand(b * t, h, w)
+        out = views.new_zeros(b, t, c, h, w)
+        for i in range(s):
+            img = views[i][:, None].expand(b, t, c, h, w).reshape(b * t, c, h, w)
+            map_x = maps.src_x[i].reshape(b * t, h, w).to(views.dtype)
+            map_y = rows if maps.src_y is None else maps.src_y[i].reshape(b * t, h, w).to(views.dtype)
+            warped = remap(img, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
+            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped.view(b, t, c, h, w)
+        return out
+
+    def forward(
+        self,
+        view1: torch.Tensor,
+        view2: torch.Tensor | None = None,
+        *,
+        correspondence: Correspondence,
+        thetas: object,
+    ) -> torch.Tensor:
+        """Synthesizes the novel views.
+
+        Args:
+            view1: (B, C, H, W) or (C, H, W) first seed view (angle 0).
+            view2: same shape, second seed view (angle ``alpha``), or None to warp view 1 alone.
+            correspondence: (B, H, W) correspondences between the seed views.
+            thetas: (T,) novel angles in degrees.
+
+        Returns:
+            (B, T, C, H, W) views (or (T, C, H, W) for unbatched input); differentiable
+            with respect to ``view1`` and ``view2``.
+        """
+        v1 = check_float_tensor(view1, "view1")
+        check_ndim(v1, "view1", (3, 4), "(B, C, H, W) or (C, H, W)")
+        unbatched = v1.ndim == 3
+        views = [v1[None] if unbatched else v1]
+        if view2 is not None:
+            v2 = check_float_tensor(view2, "view2")
+            if v2.shape != v1.shape:
+                raise ValueError(
+                    f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}"
+                )
+            views.append(v2[None] if unbatched else v2)
+        b, _, h, w = views[0].shape
+        if correspondence.shape != (b, h, w):
+            raise ValueError(
+                f"correspondence must have shape (B, H, W) = {(b, h, w)} to match the views, "
+                f"got {correspondence.shape}"
+            )
+        corr = correspondence.to(device=v1.device)
+        maps = self.maps(corr, thetas, n_sources=len(views))
+        out = self.apply_maps(maps, torch.stack(views))
+        return out[0] if unbatched else out
