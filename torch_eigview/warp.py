@@ -17,9 +17,11 @@ builds the same linear map as the sparse product G·C of Eqs. 3–6.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from kornia.geometry.transform import remap
 
 from torch_eigview.cameras import orthographic_coefficients
@@ -88,25 +90,27 @@ def invert_row_map(
     if w < 2 or not bool(seg_ok.any()):
         return out.view(b, t, h, w), hit.view(b, t, h, w)
     n_max = math.ceil(float(length[seg_ok].max())) + 1
-    steps = torch.arange(n_max, dtype=dtype, device=device)
     first = torch.ceil(f0)
-    # candidate target columns of each segment: (B, T, H, W - 1, n_max)
+    # Candidate target columns first + m of each segment, m < n_max: keep those inside the
+    # segment and the image, then work on the kept ones only (one nonzero, no masks).
+    steps = torch.arange(n_max, dtype=dtype, device=device)
     cols = first[..., None] + steps
     ok = seg_ok[..., None] & (cols <= f1[..., None]) & (cols >= 0) & (cols <= w - 1)
-    frac = (cols - f0[..., None]) / length.clamp_min(torch.finfo(dtype).tiny)[..., None]
-    k = torch.arange(w - 1, dtype=dtype, device=device)[:, None]
-    src = k + frac
+    sel = ok.reshape(-1).nonzero().squeeze(1)
+    seg = sel // n_max
+    col = cols.reshape(-1)[sel]
+    f0s = f0.reshape(-1)[seg]
+    frac = (col - f0s) / length.reshape(-1)[seg]
+    src = (seg % (w - 1)).to(dtype) + frac
     if depth is None:
         key = src
     else:
-        d0, d1 = depth[..., :-1, None], depth[..., 1:, None]
-        key = d0 + (d1 - d0) * frac
-    row = torch.arange(b * t * h, device=device).view(b, t, h, 1, 1) * w
-    idx = (row + cols.clamp(0, w - 1).long())[ok]
-    key, src = key[ok], src[ok]
+        d0 = depth[..., :-1].reshape(-1)[seg]
+        key = d0 + (depth[..., 1:].reshape(-1)[seg] - d0) * frac
+    idx = (seg // (w - 1)) * w + col.long()
     best = torch.full((b * t * h * w,), -math.inf, dtype=dtype, device=device)
     best.scatter_reduce_(0, idx, key, reduce="amax")
-    win = key >= best[idx]
+    win = (key >= best[idx]).nonzero().squeeze(1)
     out.scatter_reduce_(0, idx[win], src[win], reduce="amax", include_self=False)
     hit[idx] = True
     return out.view(b, t, h, w), hit.view(b, t, h, w)
@@ -135,17 +139,23 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     return torch.where(hit, src, filled)
 
 
-def _sample(field: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """Bilinear samples of ``field`` (B, T, H, W) at pixel coordinates ``x``, ``y`` (B, T, H, W)."""
-    b, t, h, w = field.shape
-    out = remap(
-        field.reshape(b * t, 1, h, w),
-        x.reshape(b * t, h, w),
-        y.reshape(b * t, h, w),
-        padding_mode="border",
-        align_corners=True,
-    )
-    return out.view(b, t, h, w)
+def _sampler(fields: torch.Tensor) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """Bilinear sampler of ``fields`` (B, T, F, H, W) at pixel coordinates (B, T, H, W).
+
+    These are maps, not images: sampled with ``grid_sample`` directly (border padding,
+    ``align_corners=True``, the convention kornia's ``remap`` uses for pixel maps), all F
+    fields in one call.
+    """
+    b, t, f, h, w = fields.shape
+    flat = fields.reshape(b * t, f, h, w)
+    sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
+
+    def sample(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        grid = torch.stack([x * sx - 1, y * sy - 1], dim=-1).reshape(b * t, h, w, 2)
+        out = F.grid_sample(flat, grid, mode="bilinear", padding_mode="border", align_corners=True)
+        return out.view(b, t, f, h, w)
+
+    return sample
 
 
 @dataclass(frozen=True)
@@ -191,7 +201,7 @@ class _Geometry:
 
 
 def _refine_2d(
-    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 10
+    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 8
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Inverts the 2D forward map p -> p + (dx, dy)(p) by fixed-point iteration.
 
@@ -201,15 +211,16 @@ def _refine_2d(
     b, t, h, w = dx.shape
     xx = torch.arange(w, dtype=dx.dtype, device=dx.device).expand(b, t, h, w)
     yy = torch.arange(h, dtype=dx.dtype, device=dx.device).view(h, 1).expand(b, t, h, w)
-    sx = src_x
-    sy = yy - _sample(dy, sx, yy)
+    valid_t = valid[:, None].to(dx.dtype).expand(b, t, h, w)
+    sample = _sampler(torch.stack([dx, dy, valid_t], dim=2))
+    sx, sy = src_x, yy - dy
     for _ in range(iters):
-        sx = xx - _sample(dx, sx, sy)
-        sy = yy - _sample(dy, sx, sy)
-    res = (sx + _sample(dx, sx, sy) - xx).abs() + (sy + _sample(dy, sx, sy) - yy).abs()
-    ok = _sample(valid[:, None].to(dx.dtype).expand(b, t, h, w), sx, sy) > 0.999
+        d = sample(sx, sy)
+        sx, sy = xx - d[:, :, 0], yy - d[:, :, 1]
+    d = sample(sx, sy)
+    residual = (sx + d[:, :, 0] - xx).abs() + (sy + d[:, :, 1] - yy).abs()
     inside = (sx >= 0) & (sx <= w - 1) & (sy >= 0) & (sy <= h - 1)
-    return sx, sy, ok & inside & (res < 0.5)
+    return sx, sy, (d[:, :, 2] > 0.999) & inside & (residual < 0.5)
 
 
 class NovelViewWarp(torch.nn.Module):
