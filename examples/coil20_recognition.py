@@ -52,7 +52,9 @@ def main() -> None:
             row[name] = result.accuracy
             row[name + "_s"] = time.perf_counter() - t0
             records[f"{name}@{alpha:g}"] = result.to_json()
-            print(f"alpha={alpha:g} {name:9s} {result.accuracy:6.2f}%  ({row[name + '_s']:.1f} s)", flush=True)
+            print(
+                f"alpha={alpha:g} {name:9s} {result.accuracy:6.2f}%  ({row[name + '_s']:.1f} s)", flush=True
+            )
         rows.append(row)
     print()
     print("Fig. 4(b), COIL-20, 2 seed views, synth -20..20 step 1, test -45..45, k = 15 (accuracy %)")
