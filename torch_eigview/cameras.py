@@ -47,11 +47,11 @@ def orthographic_coefficients(
         True
     """
     alpha = check_alpha(alpha)
-    theta = torch.deg2rad(as_angle_tensor(thetas, "thetas", dtype=torch.float64))
-    alpha_rad = math.radians(alpha)
-    sin_alpha = math.sin(alpha_rad)
-    a = torch.sin(alpha_rad - theta) / sin_alpha
-    b = torch.sin(theta) / sin_alpha
+    theta = as_angle_tensor(thetas, "thetas", dtype=torch.float64)
+    sin_alpha = math.sin(math.radians(alpha))
+    # alpha - theta in degrees first, so that a is exactly 0 at theta = alpha (as b is at 0).
+    a = torch.sin(torch.deg2rad(alpha - theta)) / sin_alpha
+    b = torch.sin(torch.deg2rad(theta)) / sin_alpha
     return a.to(dtype), b.to(dtype)
 
 

@@ -33,7 +33,7 @@ class _Fit:
     image_shape: tuple[int, int, int] | None
 
 
-def _check_n_components(n_components: object) -> int | float:
+def check_n_components(n_components: object) -> int | float:
     if isinstance(n_components, bool) or not isinstance(n_components, numbers.Real):
         raise TypeError(
             "n_components must be an int >= 1 or a float in (0, 1) (energy fraction), "
@@ -94,7 +94,7 @@ class Eigenspace:
     ``eigenvalues_`` are the eigenvalues λ of the centred scatter matrix Xcᵀ Xc (the paper's
     λ), i.e. scikit-learn's ``explained_variance_ * (P - 1)``; ``explained_variance_`` is
     λ / (P - 1). Eigenvalues are sorted in descending order, those at or below the rank
-    tolerance ``max(λ) * max(P, N) * eps(dtype)`` are dropped, and each component's entry of
+    tolerance ``max(λ) * sqrt(max(P, N)) * eps(dtype)`` are dropped, and each component's entry of
     largest magnitude is made positive, so results do not depend on the solver's signs.
 
     Args:
@@ -115,7 +115,7 @@ class Eigenspace:
     """
 
     def __init__(self, n_components: int | float = 15, *, solver: str = "auto") -> None:
-        self.n_components = _check_n_components(n_components)
+        self.n_components = check_n_components(n_components)
         if not isinstance(solver, str):
             raise TypeError(f"solver must be a str, one of {_SOLVERS}, got {type(solver).__name__}")
         if solver not in _SOLVERS:
@@ -291,7 +291,9 @@ class Eigenspace:
         total = eigvals.sum()
         # The scatter matrix is computed in the input dtype, so eigenvalues below this are
         # rounding noise whatever precision eigh ran in.
-        tol = float(eigvals[0]) * max(n_views, n_features) * torch.finfo(dtype).eps
+        # Rounding in a Gram/scatter product of length-n dot products is ~sqrt(n)·eps relative
+        # to the largest eigenvalue; eigenvalues below that carry no signal.
+        tol = float(eigvals[0]) * math.sqrt(max(n_views, n_features)) * torch.finfo(dtype).eps
         rank = int((eigvals > tol).sum())
         if rank == 0:
             raise ValueError(f"{name} has rank 0 after centring: all {n_views} views are identical")

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import torch
 
 from torch_eigview.data import CoilFolder
-from torch_eigview.eigenspace import Eigenspace
+from torch_eigview.eigenspace import Eigenspace, check_n_components
+from torch_eigview.errors import check_alpha
 from torch_eigview.projection import EigenProjection
 from torch_eigview.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
@@ -95,6 +96,14 @@ class CoilExperiment:
     synthesis: SynthesisOptions = field(default_factory=SynthesisOptions)
 
     def __post_init__(self) -> None:
+        check_alpha(self.alpha)
+        if abs(self.alpha) * (self.views - 1) >= 180:
+            raise ValueError(f"alpha={self.alpha} with {self.views} seed views spans 180 degrees or more")
+        check_n_components(self.components)
+        if len(self.synth) != 3:
+            raise ValueError(f"synth must be (start, stop, step) in degrees, got {self.synth!r}")
+        if len(self.test) != 2:
+            raise ValueError(f"test must be (start, stop) in degrees, got {self.test!r}")
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         if self.views not in (2, 3):

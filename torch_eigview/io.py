@@ -6,6 +6,7 @@ The file is a ``torch.save`` of plain tensors, numbers and strings only, so it l
 
 from __future__ import annotations
 
+import json
 import os
 from typing import Any
 
@@ -28,6 +29,13 @@ def save_recognizer(
     """Writes the recognizer (projection, gallery, labels, poses) and JSON-like ``metadata``."""
     if not isinstance(recognizer, NearestNeighborRecognizer):
         raise TypeError(f"recognizer must be a NearestNeighborRecognizer, got {type(recognizer).__name__}")
+    meta = dict(metadata or {})
+    try:
+        json.dumps(meta, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"metadata must hold JSON values only (str, int, float, bool, None, lists, dicts): {exc}"
+        ) from exc
     proj = recognizer.projection
     payload = {
         "format": FORMAT,
@@ -41,7 +49,7 @@ def save_recognizer(
         "labels": recognizer.labels.detach().cpu(),
         "poses": recognizer.poses.detach().cpu(),
         "label_names": recognizer.label_names,
-        "metadata": dict(metadata or {}),
+        "metadata": meta,
     }
     torch.save(payload, os.fspath(path))
 
@@ -56,8 +64,10 @@ def load_recognizer(path: str | os.PathLike[str]) -> tuple[NearestNeighborRecogn
         ValueError: the file is missing, truncated, not one of ours, or of another version.
     """
     path = os.fspath(path)
-    if not os.path.isfile(path):
+    if not os.path.exists(path):
         raise ValueError(f"model file {path!r} does not exist")
+    if not os.path.isfile(path):
+        raise ValueError(f"model file {path!r} is not a file")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # a truncated zip or an arbitrary file: report which
@@ -71,15 +81,20 @@ def load_recognizer(path: str | os.PathLike[str]) -> tuple[NearestNeighborRecogn
             f"model file {path!r} has format version {payload.get('version')!r}; "
             f"this torch_eigview reads version {FORMAT_VERSION}"
         )
-    shape = payload["image_shape"]
-    projection = EigenProjection(
-        payload["mean"],
-        payload["components"],
-        payload["eigenvalues"] if payload["eigenvalues"].numel() else None,
-        tuple(shape) if shape is not None else None,
-        unit_norm=bool(payload["unit_norm"]),
-    )
-    recognizer = NearestNeighborRecognizer(
-        projection, payload["codes"], payload["labels"], payload["poses"], payload["label_names"]
-    )
-    return recognizer, dict(payload["metadata"])
+    try:
+        shape = payload["image_shape"]
+        projection = EigenProjection(
+            payload["mean"],
+            payload["components"],
+            payload["eigenvalues"] if payload["eigenvalues"].numel() else None,
+            tuple(shape) if shape is not None else None,
+            unit_norm=bool(payload["unit_norm"]),
+        )
+        recognizer = NearestNeighborRecognizer(
+            projection, payload["codes"], payload["labels"], payload["poses"], payload["label_names"]
+        )
+        return recognizer, dict(payload["metadata"])
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ValueError(
+            f"model file {path!r} is a damaged or incomplete torch_eigview model: {exc!r}"
+        ) from exc

@@ -81,12 +81,16 @@ class NearestNeighborRecognizer(nn.Module):
             raise ValueError(
                 f"codes must have shape (G, {projection.n_components}), got {tuple(codes.shape)}"
             )
+        for tensor, name in ((labels, "labels"), (poses, "poses")):
+            if not isinstance(tensor, torch.Tensor):
+                raise TypeError(f"{name} must be a torch.Tensor, got {type(tensor).__name__}")
         if tuple(labels.shape) != (g,) or labels.is_floating_point():
             raise ValueError(
                 f"labels must be an integer tensor of shape ({g},), got {labels.dtype} {tuple(labels.shape)}"
             )
         if tuple(poses.shape) != (g,):
             raise ValueError(f"poses must have shape ({g},), got {tuple(poses.shape)}")
+        check_finite(poses.to(torch.float64), "poses")
         n_distinct = int(labels.unique().numel())
         if label_names is not None and len(label_names) != n_distinct:
             raise ValueError(

@@ -72,7 +72,7 @@ def invert_row_map(
 
     Args:
         dst_x_for_src: (B, T, H, W) forward map x3(x1) in pixels.
-        valid: (B, H, W) bool, source pixels with a trusted correspondence.
+        valid: (B, H, W) or (B, T, H, W) bool, source pixels with a trusted correspondence.
         depth: (B, T, H, W) depth towards the novel camera, or None (ties: largest source x).
         max_stretch: longest segment (target pixels) still taken as one surface.
 
@@ -84,7 +84,8 @@ def invert_row_map(
     dtype, device = dst_x_for_src.dtype, dst_x_for_src.device
     f0, f1 = dst_x_for_src[..., :-1], dst_x_for_src[..., 1:]
     length = f1 - f0
-    seg_ok = (valid[:, None, :, :-1] & valid[:, None, :, 1:]) & (length > 0) & (length <= max_stretch)
+    valid = valid[:, None] if valid.ndim == 3 else valid
+    seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
     out = torch.full((b * t * h * w,), math.nan, dtype=dtype, device=device)
     hit = torch.zeros(b * t * h * w, dtype=torch.bool, device=device)
     if w < 2 or not bool(seg_ok.any()):
@@ -187,6 +188,10 @@ class _Geometry:
         big_z = ((x2 - c)[:, None] - big_x * math.cos(al)) / math.sin(al)
         dst_x_for_src = c + self.a * (x1 - c)[:, None] + self.b * (x2 - c)[:, None]
         depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
+        # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
+        other = self.a if second else self.b
+        valid = valid[:, None] | (other == 0)
         src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch)
         # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
         scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
@@ -211,7 +216,7 @@ def _refine_2d(
     b, t, h, w = dx.shape
     xx = torch.arange(w, dtype=dx.dtype, device=dx.device).expand(b, t, h, w)
     yy = torch.arange(h, dtype=dx.dtype, device=dx.device).view(h, 1).expand(b, t, h, w)
-    valid_t = valid[:, None].to(dx.dtype).expand(b, t, h, w)
+    valid_t = (valid[:, None] if valid.ndim == 3 else valid).to(dx.dtype).expand(b, t, h, w)
     sample = _sampler(torch.stack([dx, dy, valid_t], dim=2))
     sx, sy = src_x, yy - dy
     for _ in range(iters):

@@ -1,0 +1,49 @@
+"""Shared fixtures: devices, dtypes with their tolerances, and the COIL-20 folder.
+
+Test files may define a local ``dtype`` or ``device`` fixture (or parametrize those names);
+pytest then uses the local one, so these are defaults, not requirements.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+# One tolerance per dtype: float32 keeps about 7 digits, float64 about 16; the warp and the
+# camera model lose a few digits to trigonometry and bilinear weights, not more.
+TOL: dict[torch.dtype, dict[str, float]] = {
+    torch.float32: dict(atol=1e-5, rtol=1e-5),
+    torch.float64: dict(atol=1e-10, rtol=1e-10),
+}
+
+_CUDA = torch.cuda.is_available()
+
+
+@pytest.fixture(
+    params=["cpu", pytest.param("cuda", marks=pytest.mark.skipif(not _CUDA, reason="CUDA not available"))]
+)
+def device(request: pytest.FixtureRequest) -> torch.device:
+    """Every test that takes ``device`` runs on the CPU, and on CUDA where there is one."""
+    return torch.device(request.param)
+
+
+@pytest.fixture(params=[torch.float32, torch.float64], ids=["float32", "float64"])
+def dtype(request: pytest.FixtureRequest) -> torch.dtype:
+    return request.param
+
+
+@pytest.fixture
+def tol(dtype: torch.dtype) -> dict[str, float]:
+    """``atol``/``rtol`` for ``torch.testing.assert_close`` at the current ``dtype``."""
+    return TOL[dtype]
+
+
+@pytest.fixture(scope="session")
+def coil_root() -> Path:
+    """The processed COIL-20 images in ``../shared/data/coil-20-proc``; skips when absent."""
+    root = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
+    if not root.is_dir():
+        pytest.skip(f"COIL-20 not found at {root}: ../shared/data/coil-20-proc is absent")
+    return root

@@ -1,0 +1,134 @@
+"""Test helpers: seeded random data and the one ``check_module`` used for every nn.Module."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import io
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+
+
+def rand(
+    *shape: int,
+    seed: int = 0,
+    dtype: torch.dtype = torch.float64,
+    device: torch.device | str = "cpu",
+) -> torch.Tensor:
+    """Uniform [0, 1) data made on the CPU with a fixed seed, then moved: the same on every device."""
+    gen = torch.Generator().manual_seed(seed)
+    return torch.rand(*shape, generator=gen, dtype=torch.float64).to(device=device, dtype=dtype)
+
+
+def _map_tensors(obj: Any, fn: Any) -> Any:
+    """Applies ``fn`` to every tensor in ``obj`` (tensors, tuples, lists, dicts, dataclasses)."""
+    if isinstance(obj, torch.Tensor):
+        return fn(obj)
+    if isinstance(obj, (tuple, list)):
+        return type(obj)(_map_tensors(v, fn) for v in obj)
+    if isinstance(obj, dict):
+        return {k: _map_tensors(v, fn) for k, v in obj.items()}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        changes = {f.name: _map_tensors(getattr(obj, f.name), fn) for f in dataclasses.fields(obj)}
+        return dataclasses.replace(obj, **changes)
+    return obj
+
+
+def _tensors(obj: Any) -> list[torch.Tensor]:
+    found: list[torch.Tensor] = []
+    _map_tensors(obj, lambda t: found.append(t) or t)
+    return found
+
+
+def _assert_same(actual: Any, expected: Any, what: str, **tol: float) -> None:
+    got, want = _tensors(actual), _tensors(expected)
+    assert len(got) == len(want), f"{what}: {len(got)} output tensors, expected {len(want)}"
+    for g, w in zip(got, want, strict=True):
+        torch.testing.assert_close(g, w, equal_nan=True, msg=lambda m: f"{what}: {m}", **tol)
+
+
+def check_module(
+    module: torch.nn.Module,
+    inputs: tuple[Any, ...],
+    kwargs: dict[str, Any] | None = None,
+    *,
+    batched_kwargs: Sequence[str] = (),
+    empty_batch: bool = True,
+    tol: dict[str, float] | None = None,
+) -> None:
+    """Invariants every module of the package keeps.
+
+    Checks that ``module(*inputs, **kwargs)``
+
+    - leaves its input tensors unchanged (no in-place writes);
+    - returns the dtype and device of ``inputs[0]``;
+    - on the whole batch equals the per-sample calls concatenated along dim 0;
+    - works on an empty batch (B = 0) when ``empty_batch``;
+    - gives the same output after a ``state_dict`` round trip (saved, loaded with
+      ``weights_only=True`` into a copy whose tensors were zeroed) and after pickling the
+      whole module (``torch.save`` / ``torch.load(weights_only=False)``).
+
+    Args:
+        module: the module under test, already on the inputs' device.
+        inputs: positional arguments; ``inputs[0]`` is a (B, ...) tensor. Every tensor among
+            them (also inside tuples or dataclasses such as ``Correspondence``; None passes
+            through) is batched along dim 0.
+        kwargs: keyword arguments; only those named in ``batched_kwargs`` are split along
+            dim 0, the others (angles, options) are passed to every call unchanged.
+        batched_kwargs: names of the keyword arguments that carry the batch dimension.
+        empty_batch: also call the module with B = 0.
+        tol: ``atol``/``rtol`` for the batched-vs-per-sample comparison; default
+            ``torch.testing.assert_close``'s for the dtype. The round trips must be exact.
+    """
+    kwargs = dict(kwargs or {})
+    tol = dict(tol or {})
+    first = inputs[0]
+    n = first.shape[0]
+    unknown = set(batched_kwargs) - set(kwargs)
+    assert not unknown, f"batched_kwargs {sorted(unknown)} are not in kwargs"
+
+    def call(m: torch.nn.Module, index: slice | None = None) -> Any:
+        if index is None:
+            return m(*inputs, **kwargs)
+        args = _map_tensors(inputs, lambda t: t[index])
+        kw = {k: _map_tensors(v, lambda t: t[index]) if k in batched_kwargs else v for k, v in kwargs.items()}
+        return m(*args, **kw)
+
+    before = _map_tensors((inputs, kwargs), lambda t: t.detach().clone())
+    out = call(module)
+    _assert_same((inputs, kwargs), before, "inputs modified in place", atol=0.0, rtol=0.0)
+
+    for t in _tensors(out):
+        assert t.dtype == first.dtype, f"output dtype {t.dtype} != input dtype {first.dtype}"
+        assert t.device == first.device, f"output device {t.device} != input device {first.device}"
+        assert t.shape[0] == n, f"output batch {t.shape[0]} != input batch {n}"
+
+    per_sample = [call(module, slice(i, i + 1)) for i in range(n)]
+    parts = [_tensors(p) for p in per_sample]
+    stacked = [torch.cat([p[j] for p in parts]) for j in range(len(parts[0]))]
+    _assert_same(out, stacked, "batched != per-sample", **tol)
+
+    if empty_batch:
+        empty = call(module, slice(0, 0))
+        for t in _tensors(empty):
+            assert t.shape[0] == 0, f"empty batch gave an output of shape {tuple(t.shape)}"
+        assert [t.shape[1:] for t in _tensors(empty)] == [t.shape[1:] for t in _tensors(out)]
+
+    buffer = io.BytesIO()
+    torch.save(module.state_dict(), buffer)
+    buffer.seek(0)
+    restored = copy.deepcopy(module)
+    with torch.no_grad():
+        for t in restored.state_dict().values():
+            t.zero_()
+    restored.load_state_dict(torch.load(buffer, weights_only=True))
+    _assert_same(call(restored), out, "state_dict round trip", atol=0.0, rtol=0.0)
+
+    buffer = io.BytesIO()
+    torch.save(module, buffer)
+    buffer.seek(0)
+    unpickled = torch.load(buffer, weights_only=False, map_location=first.device)
+    assert type(unpickled) is type(module) and repr(unpickled) == repr(module)
+    _assert_same(call(unpickled), out, "pickle round trip", atol=0.0, rtol=0.0)
