@@ -72,7 +72,7 @@ def check_module(
 
     Args:
         module: the module under test, already on the inputs' device.
-        inputs: positional arguments; ``inputs[0]`` is a (B, ...) tensor. Every tensor among
+        inputs: positional arguments; ``inputs[0]`` is a (B, ...) tensor, B >= 1. Every tensor among
             them (also inside tuples or dataclasses such as ``Correspondence``; None passes
             through) is batched along dim 0.
         kwargs: keyword arguments; only those named in ``batched_kwargs`` are split along
@@ -86,6 +86,7 @@ def check_module(
     tol = dict(tol or {})
     first = inputs[0]
     n = first.shape[0]
+    assert n > 0, "check_module needs a non-empty batch (it checks B = 0 itself)"
     unknown = set(batched_kwargs) - set(kwargs)
     assert not unknown, f"batched_kwargs {sorted(unknown)} are not in kwargs"
 

@@ -117,6 +117,16 @@ def test_bad_thetas(thetas: object, error: type[Exception], match: str) -> None:
         orthographic_coefficients(thetas, 10.0)
 
 
+def test_thetas_must_be_one_dimensional() -> None:
+    with pytest.raises(ValueError, match="thetas"):
+        orthographic_coefficients(torch.zeros(2, 3), 10.0)
+
+
+def test_bool_theta_is_a_type_error() -> None:
+    with pytest.raises(TypeError, match="thetas"):
+        orthographic_coefficients([True], 10.0)
+
+
 # --- elevation --------------------------------------------------------------------------
 
 

@@ -558,6 +558,23 @@ def test_constructor_errors(kwargs: dict, error: type[Exception], match: str) ->
         NovelViewWarp(**kwargs)
 
 
+@pytest.mark.parametrize("kwargs", [dict(center="a"), dict(elevation="5"), dict(depth_sign=True)], ids=str)
+def test_constructor_type_errors(kwargs: dict) -> None:
+    name = next(iter(kwargs))
+    with pytest.raises(TypeError, match=name):
+        NovelViewWarp(10.0, **kwargs)
+
+
+def test_view2_dtype_mismatch() -> None:
+    view1, view2, corr = _small_problem(1, 1, 5, 7, torch.float64, torch.device("cpu"))
+    try:
+        out = NovelViewWarp(10.0)(view1.float(), view2, correspondence=corr, thetas=[4.0])
+    except (TypeError, ValueError) as exc:
+        assert "view2" in str(exc)
+    else:
+        assert out.dtype == torch.float32
+
+
 def test_forward_errors() -> None:
     view1, view2, corr = _small_problem(2, 1, 5, 7, torch.float64, torch.device("cpu"))
     warp = NovelViewWarp(10.0)
@@ -594,3 +611,9 @@ def test_forward_errors() -> None:
 def test_repr() -> None:
     text = repr(NovelViewWarp(12.5, 30.0, elevation=10.0, max_stretch=2.0))
     assert text == "NovelViewWarp(alpha=12.5, center=30.0, elevation=10.0, max_stretch=2.0)"
+
+
+def test_thetas_beyond_a_quarter_turn_are_refused() -> None:
+    view1, view2, corr = _small_problem(1, 1, 5, 7, torch.float64, torch.device("cpu"))
+    with pytest.raises(ValueError, match=r"thetas must lie within \(-90, 90\)"):
+        NovelViewWarp(10.0)(view1, view2, correspondence=corr, thetas=[10.0, 95.0])

@@ -8,6 +8,7 @@ constraint and what was given. Private helpers trust their inputs.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 
 import torch
@@ -19,6 +20,7 @@ __all__ = [
     "check_finite",
     "check_float_tensor",
     "check_ndim",
+    "check_number",
 ]
 
 
@@ -52,6 +54,13 @@ def check_finite(x: torch.Tensor, name: str) -> None:
         raise ValueError(f"{name} must be finite, got {n_bad} NaN or infinite value(s)")
 
 
+def check_number(value: object, name: str) -> float:
+    """A real number (int or float, not bool) as a float; TypeError otherwise."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+    return float(value)
+
+
 def check_alpha(alpha: float, name: str = "alpha") -> float:
     """Checks a seed-view angle in degrees: finite and not a multiple of 180."""
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)):
@@ -67,14 +76,17 @@ def check_alpha(alpha: float, name: str = "alpha") -> float:
 def as_angle_tensor(thetas: object, name: str = "thetas", dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """Converts degrees (a number, a sequence or a tensor) to a non-empty finite 1-D tensor."""
     if isinstance(thetas, torch.Tensor):
+        if thetas.ndim > 1:
+            raise ValueError(f"{name} must be a number or have shape (T,), got shape {tuple(thetas.shape)}")
+        if thetas.dtype == torch.bool or thetas.is_complex():
+            raise TypeError(f"{name} must hold real angles in degrees, got dtype {thetas.dtype}")
         t = thetas.detach().to(dtype=dtype).reshape(-1)
     elif isinstance(thetas, (int, float)) and not isinstance(thetas, bool):
         t = torch.tensor([float(thetas)], dtype=dtype)
     elif isinstance(thetas, Sequence) and not isinstance(thetas, str):
-        try:
-            t = torch.tensor([float(v) for v in thetas], dtype=dtype)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"{name} must hold numbers (degrees), got {thetas!r}") from exc
+        if any(isinstance(v, bool) or not isinstance(v, numbers.Real) for v in thetas):
+            raise TypeError(f"{name} must hold numbers (degrees), got {thetas!r}")
+        t = torch.tensor([float(v) for v in thetas], dtype=dtype)
     else:
         raise TypeError(
             f"{name} must be a number, a sequence of numbers or a tensor, got {type(thetas).__name__}"

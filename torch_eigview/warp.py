@@ -26,7 +26,7 @@ from kornia.geometry.transform import remap
 
 from torch_eigview.cameras import orthographic_coefficients
 from torch_eigview.correspondence import Correspondence
-from torch_eigview.errors import as_angle_tensor, check_alpha, check_float_tensor, check_ndim
+from torch_eigview.errors import as_angle_tensor, check_alpha, check_float_tensor, check_ndim, check_number
 
 __all__ = ["NovelViewWarp", "WarpMaps", "fill_row_holes", "invert_row_map"]
 
@@ -271,18 +271,19 @@ class NovelViewWarp(torch.nn.Module):
     ) -> None:
         super().__init__()
         self.alpha = check_alpha(alpha)
-        if center is not None and not math.isfinite(float(center)):
+        self.center = None if center is None else check_number(center, "center")
+        if not math.isfinite(self.center or 0.0):
             raise ValueError(f"center={center} must be a finite column")
-        self.center = None if center is None else float(center)
-        if not max_stretch > 0:
+        self.max_stretch = check_number(max_stretch, "max_stretch")
+        if not self.max_stretch > 0:
             raise ValueError(f"max_stretch={max_stretch} must be positive")
-        self.max_stretch = float(max_stretch)
-        if depth_sign not in ("auto", 1, -1, 1.0, -1.0):
-            raise ValueError(f"depth_sign must be 'auto', 1 or -1, got {depth_sign!r}")
+        if isinstance(depth_sign, bool) or depth_sign not in ("auto", 1, -1, 1.0, -1.0):
+            kind = TypeError if isinstance(depth_sign, bool) else ValueError
+            raise kind(f"depth_sign must be 'auto', 1 or -1, got {depth_sign!r}")
         self.depth_sign = depth_sign
-        if not (math.isfinite(float(elevation)) and abs(float(elevation)) < 90):
+        self.elevation = check_number(elevation, "elevation")
+        if not (math.isfinite(self.elevation) and abs(self.elevation) < 90):
             raise ValueError(f"elevation={elevation} must be an angle in degrees in (-90, 90)")
-        self.elevation = float(elevation)
 
     def extra_repr(self) -> str:
         return (
@@ -307,6 +308,11 @@ class NovelViewWarp(torch.nn.Module):
         d12 = correspondence.disparity_12
         dtype, device = d12.dtype, d12.device
         theta = as_angle_tensor(thetas, "thetas")
+        if bool((theta.abs() >= 90).any()):
+            raise ValueError(
+                f"thetas must lie within (-90, 90) degrees of the first seed view, got {theta.tolist()}: "
+                "beyond that the seed views show the object's other side"
+            )
         a, b = (
             v.to(dtype=dtype, device=device).view(1, -1, 1, 1)
             for v in orthographic_coefficients(theta, self.alpha)
@@ -403,6 +409,8 @@ class NovelViewWarp(torch.nn.Module):
                 raise ValueError(
                     f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}"
                 )
+            if v2.dtype != v1.dtype:
+                raise TypeError(f"view2 must have the dtype of view1 ({v1.dtype}), got {v2.dtype}")
             views.append(v2[None] if unbatched else v2)
         b, _, h, w = views[0].shape
         if correspondence.shape != (b, h, w):
