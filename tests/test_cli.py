@@ -55,7 +55,7 @@ def test_run_writes_json(small_run: dict[str, object]) -> None:
     assert record["n_test"] == 2 * 5
     assert record["n_train_views"] == 2 * 4
     assert 0.0 <= record["accuracy"] <= 100.0
-    assert set(record["seconds"]) == {"correspondence", "synthesis", "eigen", "recognition"}
+    assert set(record["seconds"]) == {"correspondence", "synthesis", "eigen", "recognition", "total"}
 
 
 @pytest.mark.coil

@@ -17,7 +17,7 @@ OBJECTS = [1, 2, 3]
 ALPHA = 10.0
 TEST = (-10.0, 10.0)
 JSON_KEYS = {"accuracy", "per_object", "pose_mae_deg", "n_test", "n_train_views", "seconds"}
-SECONDS_KEYS = {"correspondence", "synthesis", "eigen", "recognition"}
+SECONDS_KEYS = {"correspondence", "synthesis", "eigen", "recognition", "total"}
 
 # Short ranges and 3 components keep the whole module at a few seconds; elevation 0 skips
 # the 2D refinement of the tilted camera, the costliest part of the synthesis.

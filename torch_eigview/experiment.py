@@ -111,8 +111,14 @@ class CoilExperiment:
         angle_range(*self.synth, name="synth")
         angle_range(self.test[0], self.test[1], 5.0, name="test")
 
+    def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
+        return folder.images(obj, [self.center + n * self.alpha for n in range(self.views)])
+
     def _gallery_of(
-        self, folder: CoilFolder, obj: int, seconds: dict[str, float]
+        self,
+        folder: CoilFolder,
+        obj: int,
+        seconds: dict[str, float],
     ) -> tuple[torch.Tensor, list[float]]:
         c = self.center
         if self.method == "sparse":
@@ -122,7 +128,7 @@ class CoilExperiment:
             start, stop, _ = self.synth
             angles = [c + a for a in angle_range(start, stop, 5.0, "synth")]
             return folder.images(obj, angles), angles
-        seeds = folder.images(obj, [c + n * self.alpha for n in range(self.views)])
+        seeds = self._seeds(folder, obj)
         thetas = angle_range(*self.synth, name="synth")
         out = synthesize_views(seeds, self.alpha, thetas, self.synthesis)
         for key, value in out.seconds.items():
@@ -147,6 +153,7 @@ class CoilExperiment:
             raise ValueError(f"objects {missing} are not in {folder.root} (it holds {folder.objects})")
         if not objects:
             raise ValueError("objects must name at least one object")
+        t_start = time.perf_counter()
         seconds = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0, "recognition": 0.0}
         self._elevations: dict[int, list[float]] = {}
         gallery, labels, poses = [], [], []
@@ -180,6 +187,8 @@ class CoilExperiment:
             n_ok += int(ok.sum())
             pose_err.append(wrap_degrees(result.poses - truth).abs()[ok])
         seconds["recognition"] = time.perf_counter() - t0
+        # Wall time of the whole run, reading the images included.
+        seconds["total"] = time.perf_counter() - t_start
         n_test = len(objects) * len(test_angles)
         errors = torch.cat(pose_err)
         return CoilResult(

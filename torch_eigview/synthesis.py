@@ -15,12 +15,14 @@ from dataclasses import dataclass, field
 import torch
 
 from torch_eigview.cameras import estimate_elevation
-from torch_eigview.correspondence import estimate_correspondence
+from torch_eigview.correspondence import Correspondence, estimate_correspondence
 from torch_eigview.errors import as_angle_tensor, check_alpha, check_finite, check_float_tensor, check_ndim
 from torch_eigview.normalize import foreground_mask, normalize_extent
 from torch_eigview.warp import NovelViewWarp
 
-__all__ = ["SynthesisOptions", "SynthesizedViews", "synthesize_views"]
+__all__ = ["PairGeometry", "SynthesisOptions", "SynthesizedViews", "pair_geometry", "synthesize_views"]
+
+_FAST_TVL1 = {"num_warp": 3, "num_iter": 5}
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,9 @@ class SynthesisOptions:
             elevation fit).
         center: column of the rotation axis, default the image's centre column.
         max_stretch: see :class:`~torch_eigview.warp.NovelViewWarp`.
+        flow_options: keyword arguments for the scikit-image flow function. By default
+            TV-L1 runs 3 warps of 5 iterations (scikit-image's defaults are 5 and 10):
+            3x faster, and on COIL-20 as accurate (see the README).
     """
 
     flow: str = "tvl1"
@@ -47,6 +52,13 @@ class SynthesisOptions:
     background: float = 0.05
     center: float | None = None
     max_stretch: float = 3.0
+    flow_options: dict[str, object] | None = None
+
+    def flow_kwargs(self) -> dict[str, object]:
+        """Keyword arguments for the scikit-image flow: ``flow_options``, else a fast preset."""
+        if self.flow_options is not None:
+            return dict(self.flow_options)
+        return dict(_FAST_TVL1) if self.flow == "tvl1" else {}
 
     def __post_init__(self) -> None:
         if self.flow not in ("tvl1", "ilk"):
@@ -79,24 +91,16 @@ def _pair_of(thetas: torch.Tensor, alpha: float, n_pairs: int) -> torch.Tensor:
     return torch.clamp(torch.floor(thetas / alpha), 0, n_pairs - 1).long()
 
 
-def synthesize_views(
-    seeds: torch.Tensor,
-    alpha: float,
-    thetas: object,
-    options: SynthesisOptions | None = None,
-) -> SynthesizedViews:
-    """Synthesizes the views of one object at ``thetas`` from seed views 0, α, 2α, ….
+@dataclass(frozen=True)
+class PairGeometry:
+    """What one seed pair contributes before any warping: correspondences and elevation."""
 
-    Args:
-        seeds: (V, C, H, W) seed views, V >= 2, at angles 0, α, …, (V − 1)·α.
-        alpha: angle between consecutive seed views in degrees.
-        thetas: (T,) novel angles in degrees from the first seed view.
-        options: :class:`SynthesisOptions`.
+    correspondence: Correspondence
+    elevation: float
+    seconds: float
 
-    Returns:
-        :class:`SynthesizedViews` with views in the order of ``thetas``.
-    """
-    opts = options or SynthesisOptions()
+
+def _check_seeds(seeds: torch.Tensor, alpha: float) -> tuple[torch.Tensor, float]:
     seeds = check_float_tensor(seeds, "seeds")
     check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
     if seeds.shape[0] < 2:
@@ -105,36 +109,87 @@ def synthesize_views(
     alpha = check_alpha(alpha)
     if abs(alpha) * (seeds.shape[0] - 1) >= 180:
         raise ValueError(f"alpha={alpha} with {seeds.shape[0]} seed views spans 180 degrees or more")
-    theta = as_angle_tensor(thetas, "thetas")
-    n_pairs = seeds.shape[0] - 1
-    pair = _pair_of(theta, alpha, n_pairs)
-    out = seeds.new_empty((theta.numel(), *seeds.shape[1:]))
-    seconds = {"correspondence": 0.0, "synthesis": 0.0}
-    elevations: list[float] = []
-    for n in range(n_pairs):
-        v1, v2 = seeds[n : n + 1], seeds[n + 1 : n + 2]
+    return seeds, alpha
+
+
+def pair_geometry(
+    seeds: torch.Tensor, alpha: float, options: SynthesisOptions | None = None
+) -> list[PairGeometry]:
+    """Correspondences (and the elevation) of each consecutive seed pair.
+
+    This is the optical-flow stage, kept apart so that a caller can run it ahead (for
+    example for the next object, in a worker thread, while this one is warped).
+
+    Args:
+        seeds: (V, C, H, W) seed views at 0, α, …, (V − 1)·α.
+        alpha: angle between consecutive seed views in degrees.
+        options: :class:`SynthesisOptions`.
+
+    Returns:
+        V − 1 :class:`PairGeometry` records.
+    """
+    opts = options or SynthesisOptions()
+    seeds, alpha = _check_seeds(seeds, alpha)
+    out = []
+    for n in range(seeds.shape[0] - 1):
         t0 = time.perf_counter()
-        corr = estimate_correspondence(v1, v2, method=opts.flow, threshold=opts.threshold)
+        v1, v2 = seeds[n : n + 1], seeds[n + 1 : n + 2]
+        corr = estimate_correspondence(
+            v1, v2, method=opts.flow, threshold=opts.threshold, **opts.flow_kwargs()
+        )
         elevation = opts.elevation
         if elevation == "auto":
             mask = foreground_mask(v1, opts.background)
             elevation = float(estimate_elevation(corr, alpha, center=opts.center, mask=mask)[0])
             if not math.isfinite(elevation):
                 elevation = 0.0
-        elevations.append(float(elevation))
-        t1 = time.perf_counter()
-        seconds["correspondence"] += t1 - t0
+        out.append(PairGeometry(corr, float(elevation), time.perf_counter() - t0))
+    return out
+
+
+def synthesize_views(
+    seeds: torch.Tensor,
+    alpha: float,
+    thetas: object,
+    options: SynthesisOptions | None = None,
+    geometry: list[PairGeometry] | None = None,
+) -> SynthesizedViews:
+    """Synthesizes the views of one object at ``thetas`` from seed views 0, α, 2α, ….
+
+    Args:
+        seeds: (V, C, H, W) seed views, V >= 2, at angles 0, α, …, (V − 1)·α.
+        alpha: angle between consecutive seed views in degrees.
+        thetas: (T,) novel angles in degrees from the first seed view.
+        options: :class:`SynthesisOptions`.
+        geometry: the result of :func:`pair_geometry` for these seeds, if already computed.
+
+    Returns:
+        :class:`SynthesizedViews` with views in the order of ``thetas``.
+    """
+    opts = options or SynthesisOptions()
+    seeds, alpha = _check_seeds(seeds, alpha)
+    theta = as_angle_tensor(thetas, "thetas")
+    n_pairs = seeds.shape[0] - 1
+    if geometry is None:
+        geometry = pair_geometry(seeds, alpha, opts)
+    elif len(geometry) != n_pairs:
+        raise ValueError(f"geometry must hold one record per seed pair ({n_pairs}), got {len(geometry)}")
+    pair = _pair_of(theta, alpha, n_pairs)
+    out = seeds.new_empty((theta.numel(), *seeds.shape[1:]))
+    seconds = {"correspondence": sum(g.seconds for g in geometry), "synthesis": 0.0}
+    for n, geo in enumerate(geometry):
+        t0 = time.perf_counter()
         sel = (pair == n).nonzero().flatten()
         if sel.numel() == 0:
             continue
-        warp = NovelViewWarp(alpha, opts.center, max_stretch=opts.max_stretch, elevation=float(elevation))
-        maps = warp.maps(corr, theta[sel] - n * alpha)
-        pair_seeds = torch.stack([v1, v2])  # (S=2, B=1, C, H, W)
+        warp = NovelViewWarp(alpha, opts.center, max_stretch=opts.max_stretch, elevation=geo.elevation)
+        maps = warp.maps(geo.correspondence, theta[sel] - n * alpha)
+        pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
         views = warp.apply_maps(maps, pair_seeds)[0]
         if opts.extent:
             fg = foreground_mask(pair_seeds, opts.background).to(seeds.dtype)[:, :, None]
             masks = warp.apply_maps(maps, fg)[0, :, 0] > 0.5
             views = normalize_extent(views, masks)
         out[sel] = views
-        seconds["synthesis"] += time.perf_counter() - t1
-    return SynthesizedViews(out, theta, elevations, seconds)
+        seconds["synthesis"] += time.perf_counter() - t0
+    return SynthesizedViews(out, theta, [g.elevation for g in geometry], seconds)

@@ -206,7 +206,7 @@ class _Geometry:
 
 
 def _refine_2d(
-    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 8
+    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 4
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Inverts the 2D forward map p -> p + (dx, dy)(p) by fixed-point iteration.
 
