@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from torch_eigview import CoilFolder
+
 # One tolerance per dtype: float32 keeps about 7 digits, float64 about 16; the warp and the
 # camera model lose a few digits to trigonometry and bilinear weights, not more.
 TOL: dict[torch.dtype, dict[str, float]] = {
@@ -47,3 +49,9 @@ def coil_root() -> Path:
     if not root.is_dir():
         pytest.skip(f"COIL-20 not found at {root}: ../shared/data/coil-20-proc is absent")
     return root
+
+
+@pytest.fixture(scope="session")
+def folder(coil_root: Path) -> CoilFolder:
+    """A :class:`CoilFolder` over ``coil_root`` (its image cache shared by the session)."""
+    return CoilFolder(coil_root)

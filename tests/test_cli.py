@@ -26,14 +26,6 @@ SMALL = [
 
 
 @pytest.fixture(scope="module")
-def coil_root() -> Path:
-    root = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
-    if not root.is_dir():
-        pytest.skip(f"COIL-20 not found at {root}: ../shared/data/coil-20-proc is absent")
-    return root
-
-
-@pytest.fixture(scope="module")
 def small_run(coil_root: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     """Runs ``eigview coil ... --json --save`` once; capsys is per test, so capture here."""
     out_dir = tmp_path_factory.mktemp("cli")

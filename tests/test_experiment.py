@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import pytest
 import torch
@@ -49,19 +48,6 @@ def expected_train_views(exp: CoilExperiment) -> int:
     if exp.method == "sparse":
         return n_obj * exp.views
     return n_obj * len(angle_range(exp.synth[0], exp.synth[1], 5.0, name="synth"))
-
-
-@pytest.fixture(scope="module")
-def coil_root() -> Path:
-    root = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
-    if not root.is_dir():
-        pytest.skip(f"COIL-20 not found at {root}: ../shared/data/coil-20-proc is absent")
-    return root
-
-
-@pytest.fixture(scope="module")
-def folder(coil_root: Path) -> CoilFolder:
-    return CoilFolder(coil_root)
 
 
 @pytest.fixture(scope="module")

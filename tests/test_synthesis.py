@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import torch
 import torch.nn.functional as F
@@ -17,19 +15,6 @@ ALPHA = 10.0
 # The paper's orthographic camera and no size normalization: synthesize_views is then the
 # plain two-view warp, so the view at theta = 0 is a pure function of seed 0 and the maps.
 PLAIN = SynthesisOptions(elevation=0.0, extent=False)
-
-
-@pytest.fixture(scope="module")
-def coil_root() -> Path:
-    root = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
-    if not root.is_dir():
-        pytest.skip(f"COIL-20 not found at {root}: ../shared/data/coil-20-proc is absent")
-    return root
-
-
-@pytest.fixture(scope="module")
-def folder(coil_root: Path) -> CoilFolder:
-    return CoilFolder(coil_root)
 
 
 @pytest.fixture(scope="module")
