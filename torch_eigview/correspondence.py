@@ -4,8 +4,10 @@ Convention: images are (C, H, W); x is the column, y the row; pixel centres at i
 For the orthographic camera rotating about the vertical axis a point keeps its row, so
 a correspondence is a horizontal disparity: ``x2 = x1 + disparity_12[y, x1]`` maps a
 pixel of view 1 to view 2, and ``x1 = x2 + disparity_21[y, x2]`` the other way. A pixel
-is valid when the two maps agree (forward–backward consistency); pixels of one view that
-the other does not see (occlusions) fail that check.
+is valid when the two maps agree (forward–backward consistency). Pixels of one view that
+the other does not see (occlusions) are meant to fail that check; a regularized flow
+(TV-L1) smooths across narrow occlusions, so only part of them do, and the warp's
+z-buffer and two-view blend handle the rest.
 """
 
 from __future__ import annotations
