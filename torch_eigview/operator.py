@@ -70,6 +70,10 @@ def _gather_coefficients(src_x: torch.Tensor, weight: torch.Tensor) -> torch.Ten
     use = weight != 0
     # Clamping keeps floor() in the int64 range; beyond [-1, W] no neighbour is inside.
     x = torch.where(use, src_x, 0.0).clamp(-2.0, w + 1.0)
+    # kornia's remap normalizes pixel columns to [-1, 1] and grid_sample maps them back; in
+    # float32 that round trip moves x by ~W·eps. Take the same round trip, so that C holds
+    # the weights grid sampling actually applies, not the ones it would in exact arithmetic.
+    x = ((2.0 / (w - 1)) * x - 1 + 1) * ((w - 1) / 2) if w > 1 else x
     k0 = x.floor()
     frac = x - k0
     k = torch.stack([k0, k0 + 1], dim=-1)  # (S, T, H, W, 2)
