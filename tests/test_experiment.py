@@ -191,3 +191,26 @@ def test_components_validated_at_construction() -> None:
 def test_alpha_zero_is_rejected(folder: CoilFolder) -> None:
     with pytest.raises(ValueError, match="alpha"):
         CoilExperiment(alpha=0.0, method="sparse", components=1, objects=[1, 2], test=TEST).run(folder)
+
+
+def test_rgb_coil100_layout(folder: CoilFolder, tmp_path) -> None:
+    """A COIL-100-style folder (pose in degrees, RGB): all three channels go into the views."""
+    from skimage.io import imsave
+    from skimage.transform import resize
+
+    angles = [350, 355, 0, 5, 10]
+    for obj in (1, 2):
+        for deg in angles:
+            gray = folder.image(obj, deg)[0].numpy()
+            small = resize(gray, (32, 32), anti_aliasing=True)
+            rgb = (torch.tensor(small)[..., None] * torch.tensor([1.0, 0.7, 0.4])).numpy()
+            imsave(
+                tmp_path / f"obj{obj}__{deg}.png", (rgb * 255).round().astype("uint8"), check_contrast=False
+            )
+    rgb_folder = CoilFolder(tmp_path)
+    assert rgb_folder.pose_unit == "degrees" and rgb_folder.image_shape == (3, 32, 32)
+    exp = CoilExperiment(alpha=5.0, synth=(-5.0, 10.0, 5.0), test=TEST, components=3)
+    result = exp.run(rgb_folder)
+    assert result.recognizer.projection.in_features == 3 * 32 * 32
+    assert result.n_test == 2 * 5 and result.n_train_views == 2 * 4
+    assert 0.0 <= result.accuracy <= 100.0
