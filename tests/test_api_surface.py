@@ -14,6 +14,8 @@ PUBLIC = [
     "Correspondence",
     "EigenProjection",
     "Eigenspace",
+    "KernelEigenspace",
+    "KernelProjection",
     "NearestNeighborRecognizer",
     "NotFittedError",
     "NovelViewWarp",

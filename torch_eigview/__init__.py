@@ -2,27 +2,68 @@
 
 Novel-view warping (kornia), the sparse G·C form of the data matrix (torch.sparse), the
 eigenspace (torch.linalg) and a frozen projection layer for training and ONNX export.
+
+Public names are imported lazily (PEP 562): ``import torch_eigview`` alone does not import
+torch, so the torch-free parts (``torch_eigview.predict``: onnxruntime inference) stay light.
 """
 
-from torch_eigview.cameras import estimate_elevation, orthographic_coefficients
-from torch_eigview.correspondence import (
-    Correspondence,
-    correspondence_from_disparity,
-    estimate_correspondence,
-)
-from torch_eigview.data import CoilFolder, parse_object_spec
-from torch_eigview.eigenspace import Eigenspace
-from torch_eigview.errors import NotFittedError
-from torch_eigview.experiment import CoilExperiment, CoilResult
-from torch_eigview.io import load_recognizer, save_recognizer
-from torch_eigview.normalize import foreground_mask, normalize_extent
-from torch_eigview.operator import SparseViewOperator
-from torch_eigview.projection import EigenProjection
-from torch_eigview.recognition import NearestNeighborRecognizer, Recognition
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
-from torch_eigview.warp import NovelViewWarp, WarpMaps
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from torch_eigview.cameras import estimate_elevation, orthographic_coefficients
+    from torch_eigview.correspondence import (
+        Correspondence,
+        correspondence_from_disparity,
+        estimate_correspondence,
+    )
+    from torch_eigview.data import CoilFolder, parse_object_spec
+    from torch_eigview.eigenspace import Eigenspace
+    from torch_eigview.errors import NotFittedError
+    from torch_eigview.experiment import CoilExperiment, CoilResult
+    from torch_eigview.io import load_recognizer, save_recognizer
+    from torch_eigview.kernel import KernelEigenspace
+    from torch_eigview.kernel_projection import KernelProjection
+    from torch_eigview.normalize import foreground_mask, normalize_extent
+    from torch_eigview.operator import SparseViewOperator
+    from torch_eigview.projection import EigenProjection
+    from torch_eigview.recognition import NearestNeighborRecognizer, Recognition
+    from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
+    from torch_eigview.warp import NovelViewWarp, WarpMaps
 
 __version__ = "0.1.0"
+
+# Public name -> the submodule that defines it.
+_SOURCES = {
+    "estimate_elevation": "cameras",
+    "orthographic_coefficients": "cameras",
+    "Correspondence": "correspondence",
+    "correspondence_from_disparity": "correspondence",
+    "estimate_correspondence": "correspondence",
+    "CoilFolder": "data",
+    "parse_object_spec": "data",
+    "Eigenspace": "eigenspace",
+    "NotFittedError": "errors",
+    "CoilExperiment": "experiment",
+    "CoilResult": "experiment",
+    "load_recognizer": "io",
+    "save_recognizer": "io",
+    "KernelEigenspace": "kernel",
+    "KernelProjection": "kernel_projection",
+    "foreground_mask": "normalize",
+    "normalize_extent": "normalize",
+    "SparseViewOperator": "operator",
+    "EigenProjection": "projection",
+    "NearestNeighborRecognizer": "recognition",
+    "Recognition": "recognition",
+    "SynthesisOptions": "synthesis",
+    "SynthesizedViews": "synthesis",
+    "synthesize_views": "synthesis",
+    "NovelViewWarp": "warp",
+    "WarpMaps": "warp",
+}
 
 __all__ = [
     "CoilExperiment",
@@ -31,6 +72,8 @@ __all__ = [
     "Correspondence",
     "EigenProjection",
     "Eigenspace",
+    "KernelEigenspace",
+    "KernelProjection",
     "NearestNeighborRecognizer",
     "NotFittedError",
     "NovelViewWarp",
@@ -50,3 +93,17 @@ __all__ = [
     "save_recognizer",
     "synthesize_views",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Imports a public name's submodule on first use (PEP 562) and caches the name."""
+    source = _SOURCES.get(name)
+    if source is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

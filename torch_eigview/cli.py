@@ -2,6 +2,10 @@
 
 ``eigview coil --root DIR --alpha 5 ...`` runs the paper's COIL experiment (Fig. 4(b))
 on a folder of ``obj{O}__{P}.png`` images and prints a per-object accuracy table.
+``eigview export --model FILE --out model.onnx [--recognizer]`` writes a saved model as
+ONNX; ``eigview predict --onnx model.onnx IMAGES...`` recognizes images with onnxruntime.
+
+Torch-using modules are imported inside the subcommands: ``predict`` never imports torch.
 """
 
 from __future__ import annotations
@@ -11,11 +15,10 @@ import json
 import sys
 from collections.abc import Sequence
 from functools import partial
+from typing import TYPE_CHECKING
 
-from torch_eigview.data import CoilFolder, parse_object_spec
-from torch_eigview.experiment import CoilExperiment, CoilResult
-from torch_eigview.io import save_recognizer
-from torch_eigview.synthesis import SynthesisOptions
+if TYPE_CHECKING:
+    from torch_eigview.experiment import CoilResult
 
 __all__ = ["main"]
 
@@ -46,10 +49,21 @@ def _elevation(text: str) -> float | str:
 
 
 def _objects(text: str) -> list[int]:
+    from torch_eigview.data import parse_object_spec
+
     try:
         return parse_object_spec(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _gamma(text: str) -> float | str:
+    if text == "median":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--gamma must be a number > 0 or 'median', got {text!r}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -77,7 +91,50 @@ def build_parser() -> argparse.ArgumentParser:
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
     coil.add_argument("--save", metavar="FILE", help="write the fitted eigenspace and gallery")
+    coil.add_argument(
+        "--kernel",
+        choices=("rbf", "poly", "cosine", "linear"),
+        default=None,
+        help="kernel PCA instead of the linear eigenspace (not with --save)",
+    )
+    coil.add_argument(
+        "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
+    )
+    _add_export_and_predict(sub)
     return parser
+
+
+def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from torch_eigview.predict import add_arguments
+
+    export = sub.add_parser("export", help="write a saved model (eigview coil --save) as ONNX")
+    export.add_argument("--model", required=True, metavar="FILE", help="file written by eigview coil --save")
+    export.add_argument("--out", required=True, metavar="FILE", help="the .onnx file to write")
+    export.add_argument(
+        "--recognizer",
+        action="store_true",
+        help="export the whole recognizer (images -> label, pose, distance), not just the projection",
+    )
+    export.add_argument("--opset", type=int, default=18, help="ONNX opset (>= 18)")
+    predict = sub.add_parser("predict", help="recognize images with an exported ONNX recognizer (no torch)")
+    add_arguments(predict)
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    from torch_eigview.io import load_recognizer
+    from torch_eigview.onnx import export_projection, export_recognizer
+
+    recognizer, _ = load_recognizer(args.model)
+    if args.recognizer:
+        info = export_recognizer(recognizer, args.out, opset_version=args.opset)
+    else:
+        info = export_projection(recognizer.projection, args.out, opset_version=args.opset)
+    c, h, w = info.image_shape
+    print(
+        f"wrote {args.out}: {info.kind}, images (B, {c}, {h}, {w}) float32, k={info.n_components}, "
+        f"unit_norm={info.unit_norm}" + (f", {len(info.label_names)} labels" if info.label_names else "")
+    )
+    return 0
 
 
 def format_table(result: CoilResult, title: str) -> str:
@@ -94,6 +151,11 @@ def format_table(result: CoilResult, title: str) -> str:
 
 
 def _run_coil(args: argparse.Namespace) -> int:
+    from torch_eigview.data import CoilFolder
+    from torch_eigview.experiment import CoilExperiment
+    from torch_eigview.io import save_recognizer
+    from torch_eigview.synthesis import SynthesisOptions
+
     folder = CoilFolder(args.root)
     experiment = CoilExperiment(
         alpha=args.alpha,
@@ -106,7 +168,11 @@ def _run_coil(args: argparse.Namespace) -> int:
         objects=args.objects,
         unit_norm=not args.no_unit_norm,
         synthesis=SynthesisOptions(flow=args.flow, elevation=args.elevation, extent=not args.no_extent),
+        kernel=args.kernel,
+        gamma=args.gamma,
     )
+    if args.kernel and args.save:
+        raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
     progress = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -114,6 +180,8 @@ def _run_coil(args: argparse.Namespace) -> int:
         progress = partial(tqdm, desc=f"{args.method} objects", unit="obj")
     result = experiment.run(folder, progress=progress)
     title = f"COIL {args.method}: alpha={args.alpha:g}, {args.views} seed views, center={args.center:g}"
+    if args.kernel:
+        title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
     print(format_table(result, title))
     if args.json:
         with open(args.json, "w") as fh:
@@ -131,6 +199,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "coil":
             return _run_coil(args)
+        if args.command == "export":
+            return _run_export(args)
+        if args.command == "predict":
+            from torch_eigview.predict import run
+
+            return run(args)
     except ValueError as exc:
         parser.exit(2, f"eigview: error: {exc}\n")
     return 1

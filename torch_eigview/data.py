@@ -16,10 +16,10 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
-import skimage.io
 import torch
 
 from .errors import as_angle_tensor
+from .images import read_image
 
 __all__ = ["CoilFolder", "parse_object_spec"]
 
@@ -241,20 +241,4 @@ class CoilFolder:
 
 def _decode(path: Path) -> np.ndarray:
     """Reads one file as a checked ``(C, H, W)`` array of its own dtype (alpha dropped)."""
-    try:
-        arr = np.asarray(skimage.io.imread(path))
-    except Exception as exc:  # imageio/PIL raise OSError, SyntaxError, ... for bad files
-        raise ValueError(f"cannot read image {path}: {exc}") from exc
-    if arr.ndim == 2:
-        arr = arr[None]
-    elif arr.ndim == 3 and arr.shape[-1] in (1, 2, 3, 4):
-        # Channels 2 and 4 are alpha (gray+alpha, RGBA): dropped.
-        keep = {1: 1, 2: 1, 3: 3, 4: 3}[arr.shape[-1]]
-        arr = np.ascontiguousarray(np.moveaxis(arr[..., :keep], -1, 0))
-    else:
-        raise ValueError(f"image {path} must be (H, W) or (H, W, 1..4), got shape {arr.shape}")
-    if arr.dtype.kind not in "buf":
-        raise ValueError(f"image {path} must hold unsigned or float pixels, got dtype {arr.dtype}")
-    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-        raise ValueError(f"image {path} must be finite, got NaN or infinite pixels")
-    return arr
+    return read_image(path)

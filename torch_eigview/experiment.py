@@ -19,6 +19,8 @@ import torch
 from torch_eigview.data import CoilFolder
 from torch_eigview.eigenspace import Eigenspace, check_n_components
 from torch_eigview.errors import check_alpha
+from torch_eigview.kernel import KernelEigenspace
+from torch_eigview.kernel_projection import KernelProjection
 from torch_eigview.projection import EigenProjection
 from torch_eigview.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
@@ -82,6 +84,9 @@ class CoilExperiment:
         objects: object ids, or None for all in the folder.
         unit_norm: L2-normalize every view (gallery and test) before the eigenspace.
         synthesis: options of the novel-view synthesis.
+        kernel: None for the linear eigenspace (the paper's), or "rbf", "poly", "cosine",
+            "linear" for a :class:`KernelEigenspace` over the same gallery.
+        gamma: the kernel's γ (None: 1/N; "median": 1/median squared distance, rbf only).
     """
 
     alpha: float = 5.0
@@ -94,8 +99,14 @@ class CoilExperiment:
     objects: Sequence[int] | None = None
     unit_norm: bool = True
     synthesis: SynthesisOptions = field(default_factory=SynthesisOptions)
+    kernel: str | None = None
+    gamma: float | str | None = None
 
     def __post_init__(self) -> None:
+        if self.kernel is not None:
+            KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)  # validates both
+        elif self.gamma is not None:
+            raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
         check_alpha(self.alpha)
         if abs(self.alpha) * (self.views - 1) >= 180:
             raise ValueError(f"alpha={self.alpha} with {self.views} seed views spans 180 degrees or more")
@@ -165,11 +176,16 @@ class CoilExperiment:
         x = torch.cat(gallery)
         t0 = time.perf_counter()
         x_fit = _unit_rows(x) if self.unit_norm else x.flatten(1)
-        space = Eigenspace(self.components).fit(x_fit)
         c, h, w = x.shape[1:]
-        projection = EigenProjection(
-            space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=self.unit_norm
-        )
+        projection: EigenProjection | KernelProjection
+        if self.kernel is None:
+            space = Eigenspace(self.components).fit(x_fit)
+            projection = EigenProjection(
+                space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=self.unit_norm
+            )
+        else:
+            kspace = KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)
+            projection = kspace.fit(x_fit.reshape(-1, c, h, w)).to_module(unit_norm=self.unit_norm)
         recognizer = NearestNeighborRecognizer.from_views(
             projection, x, torch.tensor(labels), wrap_degrees(torch.tensor(poses, dtype=x.dtype))
         )

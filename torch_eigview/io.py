@@ -37,6 +37,11 @@ def save_recognizer(
             f"metadata must hold JSON values only (str, int, float, bool, None, lists, dicts): {exc}"
         ) from exc
     proj = recognizer.projection
+    if not isinstance(proj, EigenProjection):
+        raise TypeError(
+            f"recognizer.projection must be an EigenProjection (format version {FORMAT_VERSION} holds a "
+            f"linear eigenspace), got {type(proj).__name__}"
+        )
     payload = {
         "format": FORMAT,
         "version": FORMAT_VERSION,

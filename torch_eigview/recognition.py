@@ -12,6 +12,7 @@ import torch
 from torch import nn
 
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
+from torch_eigview.kernel_projection import KernelProjection
 from torch_eigview.projection import EigenProjection
 
 __all__ = ["NearestNeighborRecognizer", "Recognition"]
@@ -42,7 +43,8 @@ class NearestNeighborRecognizer(nn.Module):
     the search; squared distances are expanded as ``|z|² - 2 z·g + |g|²``.
 
     Args:
-        projection: the frozen :class:`EigenProjection` (k components).
+        projection: the frozen :class:`EigenProjection` or :class:`KernelProjection`
+            (any ``nn.Module`` with an int ``n_components`` k and tensor buffers).
         codes: (G, k) gallery points in the eigenspace.
         labels: (G,) int64 object labels.
         poses: (G,) poses in degrees.
@@ -62,15 +64,20 @@ class NearestNeighborRecognizer(nn.Module):
 
     def __init__(
         self,
-        projection: EigenProjection,
+        projection: EigenProjection | KernelProjection,
         codes: torch.Tensor,
         labels: torch.Tensor,
         poses: torch.Tensor,
         label_names: list[str] | None = None,
     ) -> None:
         super().__init__()
-        if not isinstance(projection, EigenProjection):
-            raise TypeError(f"projection must be an EigenProjection, got {type(projection).__name__}")
+        n_components = getattr(projection, "n_components", None)
+        if not isinstance(projection, nn.Module) or not isinstance(n_components, int):
+            raise TypeError(
+                "projection must be an EigenProjection or a KernelProjection (an nn.Module with an int "
+                f"n_components), got {type(projection).__name__}"
+            )
+        reference = next(projection.buffers(), codes)  # the projection's dtype and device
         check_float_tensor(codes, "codes")
         check_ndim(codes, "codes", (2,), "(G, k)")
         check_finite(codes, "codes")
@@ -98,16 +105,16 @@ class NearestNeighborRecognizer(nn.Module):
             )
         self.projection = projection
         self.label_names = None if label_names is None else [str(n) for n in label_names]
-        codes = codes.detach().to(projection.mean)
+        codes = codes.detach().to(reference)
         self.register_buffer("codes", codes.clone())
         self.register_buffer("codes_sqnorm", codes.square().sum(dim=1))
         self.register_buffer("labels", labels.detach().to(torch.int64).clone())
-        self.register_buffer("poses", poses.detach().to(projection.mean).clone())
+        self.register_buffer("poses", poses.detach().to(reference).clone())
 
     @classmethod
     def from_views(
         cls,
-        projection: EigenProjection,
+        projection: EigenProjection | KernelProjection,
         views: torch.Tensor,
         labels: torch.Tensor,
         poses: torch.Tensor,
