@@ -21,6 +21,7 @@ from torch_eigview.eigenspace import Eigenspace, check_n_components
 from torch_eigview.errors import check_alpha
 from torch_eigview.kernel import KernelEigenspace
 from torch_eigview.kernel_projection import KernelProjection
+from torch_eigview.normalize import unit_rows
 from torch_eigview.projection import EigenProjection
 from torch_eigview.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
@@ -175,7 +176,7 @@ class CoilExperiment:
             poses += angles
         x = torch.cat(gallery)
         t0 = time.perf_counter()
-        x_fit = _unit_rows(x) if self.unit_norm else x.flatten(1)
+        x_fit = unit_rows(x) if self.unit_norm else x.flatten(1)
         c, h, w = x.shape[1:]
         projection: EigenProjection | KernelProjection
         if self.kernel is None:
@@ -217,8 +218,3 @@ class CoilExperiment:
             recognizer=recognizer,
             elevations=dict(self._elevations),
         )
-
-
-def _unit_rows(x: torch.Tensor) -> torch.Tensor:
-    v = x.flatten(1)
-    return v / v.norm(dim=1, keepdim=True).clamp_min(torch.finfo(v.dtype).tiny)

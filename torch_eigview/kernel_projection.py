@@ -20,6 +20,7 @@ import torch
 from torch import nn
 
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
+from torch_eigview.normalize import unit_rows
 from torch_eigview.projection import _as_image_shape
 
 __all__ = ["KERNELS", "KernelProjection", "pairwise_kernel"]
@@ -261,10 +262,7 @@ class KernelProjection(nn.Module):
 
     def prepare(self, x: torch.Tensor) -> torch.Tensor:
         """(B, ...) views → (B, N) vectors as the kernel sees them (flattened, unit norm if set)."""
-        v = x.flatten(1)
-        if self.unit_norm:
-            v = v / v.norm(dim=1, keepdim=True).clamp_min(torch.finfo(v.dtype).tiny)
-        return v
+        return unit_rows(x) if self.unit_norm else x.flatten(1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Projects a batch of views onto the kernel eigenspace.

@@ -14,7 +14,7 @@ from kornia.geometry.transform import remap
 
 from torch_eigview.errors import check_float_tensor, check_ndim
 
-__all__ = ["foreground_mask", "normalize_extent"]
+__all__ = ["foreground_mask", "normalize_extent", "unit_rows"]
 
 
 def foreground_mask(images: torch.Tensor, threshold: float = 0.05) -> torch.Tensor:
@@ -76,3 +76,10 @@ def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
     map_x = (cx + (u - (w - 1) / 2) / scale).expand(p, h, w)
     map_y = (cy + (v - (h - 1) / 2) / scale).expand(p, h, w)
     return remap(images, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
+
+
+def unit_rows(x: torch.Tensor) -> torch.Tensor:
+    """(B, ...) views → (B, N) vectors of unit L2 norm (Murase and Nayar's brightness
+    normalization); an all-zero view stays zero. Export-friendly: no data-dependent branch."""
+    v = x.flatten(1)
+    return v / v.norm(dim=1, keepdim=True).clamp_min(torch.finfo(v.dtype).tiny)

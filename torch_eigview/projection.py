@@ -15,6 +15,7 @@ import torch
 from torch import nn
 
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
+from torch_eigview.normalize import unit_rows
 
 __all__ = ["EigenProjection"]
 
@@ -174,10 +175,7 @@ class EigenProjection(nn.Module):
 
     def prepare(self, x: torch.Tensor) -> torch.Tensor:
         """(B, ...) views → (B, N) vectors as the eigenspace sees them (flattened, unit norm if set)."""
-        v = x.flatten(1)
-        if self.unit_norm:
-            v = v / v.norm(dim=1, keepdim=True).clamp_min(torch.finfo(v.dtype).tiny)
-        return v
+        return unit_rows(x) if self.unit_norm else x.flatten(1)
 
     def reconstruct(self, z: torch.Tensor) -> torch.Tensor:
         """Maps eigenspace coordinates back to views: ``z @ components + mean``.
