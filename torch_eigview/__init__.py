@@ -20,6 +20,7 @@ if TYPE_CHECKING:
         estimate_correspondence,
     )
     from torch_eigview.data import CoilFolder, parse_object_spec
+    from torch_eigview.distributed import fit_distributed
     from torch_eigview.eigenspace import Eigenspace
     from torch_eigview.errors import NotFittedError
     from torch_eigview.experiment import CoilExperiment, CoilResult
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
     from torch_eigview.operator import SparseViewOperator
     from torch_eigview.projection import EigenProjection
     from torch_eigview.recognition import NearestNeighborRecognizer, Recognition
+    from torch_eigview.streaming import StreamingEigenspace, blocks_of
     from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
     from torch_eigview.warp import NovelViewWarp, WarpMaps
 
@@ -61,6 +63,9 @@ _SOURCES = {
     "SynthesisOptions": "synthesis",
     "SynthesizedViews": "synthesis",
     "synthesize_views": "synthesis",
+    "StreamingEigenspace": "streaming",
+    "blocks_of": "streaming",
+    "fit_distributed": "distributed",
     "NovelViewWarp": "warp",
     "WarpMaps": "warp",
 }
@@ -79,12 +84,15 @@ __all__ = [
     "NovelViewWarp",
     "Recognition",
     "SparseViewOperator",
+    "StreamingEigenspace",
     "SynthesisOptions",
     "SynthesizedViews",
     "WarpMaps",
+    "blocks_of",
     "correspondence_from_disparity",
     "estimate_correspondence",
     "estimate_elevation",
+    "fit_distributed",
     "foreground_mask",
     "load_recognizer",
     "normalize_extent",

@@ -101,6 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
     )
     _add_export_and_predict(sub)
+    # Listed for --help; main() hands its arguments to torch_eigview.bench unparsed.
+    sub.add_parser("bench", help="benchmarks (warp, eigen step, GEMM, scaling): eigview bench --help")
     return parser
 
 
@@ -194,6 +196,11 @@ def _run_coil(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``eigview``; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["bench"]:
+        from torch_eigview.bench import main as bench_main
+
+        return bench_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

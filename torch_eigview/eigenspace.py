@@ -8,6 +8,7 @@ leading k eigenvectors; ``to_module`` hands them out as a frozen ``EigenProjecti
 
 from __future__ import annotations
 
+import itertools
 import math
 import numbers
 from dataclasses import dataclass
@@ -65,6 +66,45 @@ def _flip_signs(components: torch.Tensor) -> torch.Tensor:
     """Makes each row's entry of largest magnitude positive (sklearn's ``svd_flip`` on Vᵀ)."""
     peak = components.gather(1, components.abs().argmax(dim=1, keepdim=True))
     return components * torch.where(peak < 0, -1.0, 1.0).to(components.dtype)
+
+
+def _gram(xc: torch.Tensor, panels: int = 4) -> torch.Tensor:
+    """Xc Xcᵀ (P, P) from its upper block triangle, mirrored: a syrk-like product.
+
+    torch has no syrk; computing only the row panels' blocks right of the diagonal does
+    (panels + 1) / (2 panels) of the GEMM's 2·N·P² flops (10/16 for 4 panels) in large GEMMs,
+    and the result is exactly symmetric, as eigh wants. Small P: one GEMM.
+    """
+    n_views = xc.shape[0]
+    if n_views < 512:
+        return xc @ xc.T
+    edges = [n_views * i // panels for i in range(panels + 1)]
+    out = xc.new_empty(n_views, n_views)
+    for lo, hi in itertools.pairwise(edges):
+        block = xc[lo:hi] @ xc[lo:].T  # (hi - lo, P - lo)
+        out[lo:hi, lo:] = block
+        out[hi:, lo:hi] = block[:, hi - lo :].T
+    return out
+
+
+def _eigh_descending(scatter: torch.Tensor, top: int | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Eigenpairs of a symmetric float64 matrix by decreasing eigenvalue; the leading ``top``
+    only (or all when None).
+
+    For a few leading pairs of a large matrix on the CPU, LAPACK's ``dsyevr`` on an index
+    subset (SciPy) skips the back-transformation of the unwanted eigenvectors: about 2x faster
+    than ``torch.linalg.eigh`` at P = 820, k = 15, and just as exact (MRRR, backward stable).
+    The rank (eigenvalues above a tolerance) is still exact from the leading ``top``: when it is
+    below ``top`` the remaining eigenvalues, smaller, are below the tolerance too.
+    """
+    n = scatter.shape[0]
+    if top is not None and scatter.device.type == "cpu" and n >= 256 and top <= n // 4:
+        from scipy.linalg import eigh  # scikit-image depends on SciPy
+
+        w, v = eigh(scatter.numpy(), subset_by_index=[n - top, n - 1], driver="evr", check_finite=False)
+        return torch.from_numpy(w).flip(0), torch.from_numpy(v).flip(1)
+    w, v = torch.linalg.eigh(scatter)
+    return w.flip(0), v.flip(1)
 
 
 def _views_from_sparse(g: torch.Tensor, c: torch.Tensor, block_size: int) -> torch.Tensor:
@@ -260,7 +300,11 @@ class Eigenspace:
         check_ndim(x, "X", (2, 4), "(P, N) or (P, C, H, W)")
         if x.shape[0] < 2:
             raise ValueError(f"X must hold at least 2 views (rows), got P={x.shape[0]}")
-        check_finite(x, "X")
+        # NaN/inf anywhere makes the sum non-finite; a finite sum proves every value finite
+        # and is ~10x cheaper than an elementwise mask (0.2 s on the 820 x 16,384 COIL data).
+        # A non-finite sum may also be an overflow of finite values: the exact check decides.
+        if x.numel() and not bool(torch.isfinite(x.sum())):
+            check_finite(x, "X")
         image_shape = (x.shape[1], x.shape[2], x.shape[3]) if x.ndim == 4 else None
         return x.detach().reshape(x.shape[0], -1), image_shape
 
@@ -283,12 +327,13 @@ class Eigenspace:
             _, s, basis = torch.linalg.svd(xc, full_matrices=False)
             eigvals = s.double().square()
         else:
-            scatter = xc @ xc.T if solver == "gram" else xc.T @ xc
-            eigvals, basis = torch.linalg.eigh(scatter.double())
-            eigvals, basis = eigvals.flip(0), basis.flip(1)
+            scatter = (_gram(xc) if solver == "gram" else xc.T @ xc).double()
+            top = self.n_components if isinstance(self.n_components, int) else None
+            eigvals, basis = _eigh_descending(scatter, top)
 
-        # eigvals sum to trace(Xc Xcᵀ) = ||Xc||², the total over all eigenvalues.
-        total = eigvals.sum()
+        # The eigenvalues sum to trace(Xc Xcᵀ) = ||Xc||², the total over all eigenvalues
+        # (the trace also when only the leading ones were computed).
+        total = eigvals.sum() if solver == "svd" else scatter.diagonal().sum()
         # The scatter matrix is computed in the input dtype, so eigenvalues below this are
         # rounding noise whatever precision eigh ran in.
         # Rounding in a Gram/scatter product of length-n dot products is ~sqrt(n)·eps relative
