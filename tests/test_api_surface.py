@@ -8,6 +8,7 @@ from pathlib import Path
 import torch_eigview
 
 PUBLIC = [
+    "AffineCamera",
     "CoilExperiment",
     "CoilFolder",
     "CoilResult",
@@ -19,6 +20,8 @@ PUBLIC = [
     "NearestNeighborRecognizer",
     "NotFittedError",
     "NovelViewWarp",
+    "OrthographicCamera",
+    "PerspectiveCamera",
     "Recognition",
     "SparseViewOperator",
     "StreamingEigenspace",
@@ -29,14 +32,20 @@ PUBLIC = [
     "correspondence_from_disparity",
     "estimate_correspondence",
     "estimate_elevation",
+    "exact_correspondence",
     "fit_distributed",
     "foreground_mask",
     "load_recognizer",
+    "make_camera",
+    "make_object",
     "normalize_extent",
     "orthographic_coefficients",
     "parse_object_spec",
+    "render",
+    "render_views",
     "save_recognizer",
     "synthesize_views",
+    "view_correspondence",
 ]
 
 

@@ -33,6 +33,17 @@ if TYPE_CHECKING:
     from torch_eigview.recognition import NearestNeighborRecognizer, Recognition
     from torch_eigview.streaming import StreamingEigenspace, blocks_of
     from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
+    from torch_eigview.synthetic import (
+        AffineCamera,
+        OrthographicCamera,
+        PerspectiveCamera,
+        exact_correspondence,
+        make_camera,
+        make_object,
+        render,
+        render_views,
+        view_correspondence,
+    )
     from torch_eigview.warp import NovelViewWarp, WarpMaps
 
 __version__ = "0.1.0"
@@ -66,11 +77,21 @@ _SOURCES = {
     "StreamingEigenspace": "streaming",
     "blocks_of": "streaming",
     "fit_distributed": "distributed",
+    "AffineCamera": "synthetic",
+    "OrthographicCamera": "synthetic",
+    "PerspectiveCamera": "synthetic",
+    "exact_correspondence": "synthetic",
+    "make_camera": "synthetic",
+    "make_object": "synthetic",
+    "render": "synthetic",
+    "render_views": "synthetic",
+    "view_correspondence": "synthetic",
     "NovelViewWarp": "warp",
     "WarpMaps": "warp",
 }
 
 __all__ = [
+    "AffineCamera",
     "CoilExperiment",
     "CoilFolder",
     "CoilResult",
@@ -82,6 +103,8 @@ __all__ = [
     "NearestNeighborRecognizer",
     "NotFittedError",
     "NovelViewWarp",
+    "OrthographicCamera",
+    "PerspectiveCamera",
     "Recognition",
     "SparseViewOperator",
     "StreamingEigenspace",
@@ -92,14 +115,20 @@ __all__ = [
     "correspondence_from_disparity",
     "estimate_correspondence",
     "estimate_elevation",
+    "exact_correspondence",
     "fit_distributed",
     "foreground_mask",
     "load_recognizer",
+    "make_camera",
+    "make_object",
     "normalize_extent",
     "orthographic_coefficients",
     "parse_object_spec",
+    "render",
+    "render_views",
     "save_recognizer",
     "synthesize_views",
+    "view_correspondence",
 ]
 
 

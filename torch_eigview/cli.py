@@ -101,6 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
     )
     _add_export_and_predict(sub)
+    demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
+    demo.add_argument("--alpha", type=float, default=10.0, help="angle between the two seed views, degrees")
+    demo.add_argument("--size", type=int, default=64, help="image side in pixels")
+    demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
+    demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
+    demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
     # Listed for --help; main() hands its arguments to torch_eigview.bench unparsed.
     sub.add_parser("bench", help="benchmarks (warp, eigen step, GEMM, scaling): eigview bench --help")
     return parser
@@ -194,6 +200,16 @@ def _run_coil(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_demo(args: argparse.Namespace) -> int:
+    from torch_eigview.demo import run_demo
+
+    record = run_demo(args.png or None, args.alpha, size=args.size, correspondences=args.correspondences)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(record, fh, indent=2, default=str)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``eigview``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -208,6 +224,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run_coil(args)
         if args.command == "export":
             return _run_export(args)
+        if args.command == "demo":
+            return _run_demo(args)
         if args.command == "predict":
             from torch_eigview.predict import run
 
