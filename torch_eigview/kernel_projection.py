@@ -21,7 +21,7 @@ from torch import nn
 
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
 from torch_eigview.normalize import unit_rows
-from torch_eigview.projection import _as_image_shape
+from torch_eigview.projection import _as_image_shape, check_view_input
 
 __all__ = ["KERNELS", "KernelProjection", "pairwise_kernel"]
 
@@ -233,32 +233,8 @@ class KernelProjection(nn.Module):
         """T, the number of stored views (training views or Nyström landmarks)."""
         return self.vectors.shape[0]
 
-    def _layout(self) -> str:
-        n = self.in_features
-        if self.image_shape is None:
-            return f"(B, {n}) or (B, C, H, W) with C*H*W = {n}"
-        return f"(B, {n}) or (B, {', '.join(map(str, self.image_shape))})"
-
     def _check_views(self, x: torch.Tensor) -> None:
-        # Static checks only, as in EigenProjection: export evaluates them once.
-        if torch.jit.is_tracing():
-            return
-        if not isinstance(x, torch.Tensor):
-            raise TypeError(f"x must be a torch.Tensor, got {type(x).__name__}")
-        if x.ndim not in (2, 4):
-            raise ValueError(f"x must have shape {self._layout()}, got shape {tuple(x.shape)}")
-        trailing = tuple(x.shape[1:])
-        if x.ndim == 4 and self.image_shape is not None:
-            ok = trailing == self.image_shape
-        else:
-            ok = math.prod(trailing) == self.in_features
-        if not ok:
-            raise ValueError(f"x must have shape {self._layout()}, got shape {tuple(x.shape)}")
-        if x.dtype != self.vectors.dtype:
-            raise TypeError(
-                f"x must have the dtype of the layer's buffers ({self.vectors.dtype}), got {x.dtype}; "
-                "convert the input or the layer with .to(dtype)"
-            )
+        check_view_input(x, self.in_features, self.image_shape, self.vectors.dtype)
 
     def prepare(self, x: torch.Tensor) -> torch.Tensor:
         """(B, ...) views → (B, N) vectors as the kernel sees them (flattened, unit norm if set)."""

@@ -37,6 +37,37 @@ def _as_image_shape(image_shape: object, n_features: int, name: str) -> tuple[in
     return shape
 
 
+def check_view_input(
+    x: object, in_features: int, image_shape: tuple[int, int, int] | None, dtype: torch.dtype
+) -> None:
+    """Checks a batch of views for a frozen layer: (B, N) or (B, C, H, W) of the layer's dtype.
+
+    Static checks only (ndim, trailing sizes, dtype): torch.export and torch.compile evaluate
+    them once and never on data. torch.jit.trace cannot record Python checks (its sizes are
+    tensors, so they would only emit TracerWarnings): they are skipped there.
+    """
+    if torch.jit.is_tracing():
+        return
+    if not isinstance(x, torch.Tensor):
+        raise TypeError(f"x must be a torch.Tensor, got {type(x).__name__}")
+    if image_shape is None:
+        layout = f"(B, {in_features}) or (B, C, H, W) with C*H*W = {in_features}"
+    else:
+        layout = f"(B, {in_features}) or (B, {', '.join(map(str, image_shape))})"
+    trailing = tuple(x.shape[1:])
+    if x.ndim == 4 and image_shape is not None:
+        ok = trailing == image_shape
+    else:
+        ok = x.ndim in (2, 4) and math.prod(trailing) == in_features
+    if not ok:
+        raise ValueError(f"x must have shape {layout}, got shape {tuple(x.shape)}")
+    if x.dtype != dtype:
+        raise TypeError(
+            f"x must have the dtype of the layer's buffers ({dtype}), got {x.dtype}; "
+            "convert the input or the layer with .to(dtype)"
+        )
+
+
 class EigenProjection(nn.Module):
     """Projects views onto a frozen eigenspace: ``z = (vec(x) - mean) @ components.T``.
 
@@ -128,34 +159,8 @@ class EigenProjection(nn.Module):
         """k, the dimension of the eigenspace."""
         return self.components.shape[0]
 
-    def _layout(self) -> str:
-        n = self.in_features
-        if self.image_shape is None:
-            return f"(B, {n}) or (B, C, H, W) with C*H*W = {n}"
-        return f"(B, {n}) or (B, {', '.join(map(str, self.image_shape))})"
-
     def _check_views(self, x: torch.Tensor) -> None:
-        # Static checks only (ndim, trailing sizes, dtype): torch.export and torch.compile
-        # evaluate them once and never on data. torch.jit.trace cannot record Python checks
-        # (its sizes are tensors, so they would only emit TracerWarnings): skip them there.
-        if torch.jit.is_tracing():
-            return
-        if not isinstance(x, torch.Tensor):
-            raise TypeError(f"x must be a torch.Tensor, got {type(x).__name__}")
-        if x.ndim not in (2, 4):
-            raise ValueError(f"x must have shape {self._layout()}, got shape {tuple(x.shape)}")
-        trailing = tuple(x.shape[1:])
-        if x.ndim == 4 and self.image_shape is not None:
-            ok = trailing == self.image_shape
-        else:
-            ok = math.prod(trailing) == self.in_features
-        if not ok:
-            raise ValueError(f"x must have shape {self._layout()}, got shape {tuple(x.shape)}")
-        if x.dtype != self.mean.dtype:
-            raise TypeError(
-                f"x must have the dtype of the layer's buffers ({self.mean.dtype}), got {x.dtype}; "
-                "convert the input or the layer with .to(dtype)"
-            )
+        check_view_input(x, self.in_features, self.image_shape, self.mean.dtype)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Projects a batch of views onto the eigenspace.
