@@ -6,11 +6,13 @@ few repeats (``time.perf_counter``), printed with ratios to our method.
 
 Peak memory: torch's CPU allocator keeps no statistics and ``tracemalloc`` does not see
 torch's allocations, so every memory figure comes from a fresh subprocess per
-measurement: ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` (the process's peak resident
-set) after the measured work minus its value just before it, after a small warm-up fit
-that loads the BLAS/LAPACK code and thread pools. The delta is the extra peak memory of
-the measured step, views generated on the fly included; it never undercounts a torch
-tensor that was touched.
+measurement (only imports and a tiny warm-up fit before it): the peak resident set during
+the measured work (/proc/self/statm sampled every millisecond, and ``ru_maxrss`` when the
+work raised it) minus the resident set just before it. The delta is the extra peak memory
+of the measured step, views generated on the fly included.
+
+The sparse G·C product and the per-view skimage loop of the warp section are only run up
+to ``_WARP_SLOW_MAX`` pixels a side (they take minutes beyond); larger rows say "skipped".
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 import time
@@ -31,6 +34,7 @@ import torch.nn.functional as F
 __all__ = ["main", "smooth_views"]
 
 _SECTIONS = ("warp", "eigen", "gemm", "scaling", "coil100")
+_WARP_SLOW_MAX = 128  # largest side for the sparse G·C and skimage warp comparisons
 
 
 def smooth_views(obj: int, n_views: int = 41, channels: int = 1, size: int = 128) -> torch.Tensor:
@@ -72,6 +76,8 @@ def _warp_row(size: int, n_views: int, thetas: torch.Tensor, repeats: int) -> di
     warp = NovelViewWarp(5.0, elevation=0.0)
     maps = warp.maps(corr, thetas)
     t_kornia = _best(lambda: NovelViewWarp.apply_maps(maps, seeds[:, None]), repeats)
+    if size > _WARP_SLOW_MAX:
+        return dict(size=size, views=n_views, kornia_s=t_kornia, skipped=True)
     t_build = _best(lambda: SparseViewOperator.from_maps(seeds, maps), max(1, repeats // 2))
     op = SparseViewOperator.from_maps(seeds, maps)
     t_sparse = _best(op.views, repeats)
@@ -173,10 +179,61 @@ def bench_gemm(n: int, repeats: int) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------- subprocess measurements
-def _worker(spec: dict[str, Any]) -> dict[str, Any]:
-    """One measurement in this (fresh) process: seconds and ru_maxrss delta of one fit."""
-    import resource
+def _rss_bytes() -> int:
+    """The current resident set of this process (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * _PAGE
+    except OSError:  # pragma: no cover - not Linux
+        return 0
 
+
+_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+class _PeakRss:
+    """Peak resident set during a ``with`` block, minus the resident set just before it.
+
+    A thread samples /proc/self/statm every millisecond; ``ru_maxrss`` (the process's
+    high-water mark) is used as well when the block raised it, so a short peak between two
+    samples is not missed then. The baseline is the *current* resident set before the block,
+    not the earlier high-water mark (imports and warm-ups peak higher than they end, which
+    made ``ru_maxrss`` deltas read 0 for blocks that stayed below that earlier peak).
+    """
+
+    def __enter__(self) -> _PeakRss:
+        import resource
+        import threading
+
+        self._resource = resource
+        self.baseline = _rss_bytes()
+        self._max_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        self.peak = self.baseline
+        self._stop = threading.Event()
+
+        def sample() -> None:
+            while not self._stop.wait(0.001):
+                self.peak = max(self.peak, _rss_bytes())
+
+        self._thread = threading.Thread(target=sample, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, _rss_bytes())
+        max_after = self._resource.getrusage(self._resource.RUSAGE_SELF).ru_maxrss * 1024
+        if max_after > self._max_before:
+            self.peak = max(self.peak, max_after)
+
+    @property
+    def mib(self) -> float:
+        return (self.peak - self.baseline) / 2**20
+
+
+def _worker(spec: dict[str, Any]) -> dict[str, Any]:
+    """One measurement in this (fresh) process: seconds and extra peak RSS of one fit."""
     from torch_eigview.eigenspace import Eigenspace
     from torch_eigview.streaming import StreamingEigenspace
 
@@ -185,20 +242,28 @@ def _worker(spec: dict[str, Any]) -> dict[str, Any]:
     def source() -> Any:
         return (smooth_views(o, 41, ch, size) for o in range(n_obj))
 
+    after_imports = _rss_bytes()
     warm = torch.cat([smooth_views(o, 41, ch, 16) for o in range(2)])  # loads BLAS, LAPACK, pools
     Eigenspace(5).fit(warm)
     StreamingEigenspace(5, method="randomized").fit(warm)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    t0 = time.perf_counter()
+    del warm
     passes = 1
-    if kind == "explicit":
-        Eigenspace(k).fit(torch.cat(list(source())))
-    else:
-        space = StreamingEigenspace(k, method=kind, max_views=spec.get("max_views", 4096)).fit(source)
-        passes = space.n_passes_
-    seconds = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {**spec, "seconds": seconds, "peak_mib": (after - before) / 1024, "passes": passes}
+    with _PeakRss() as peak:
+        t0 = time.perf_counter()
+        if kind == "explicit":
+            Eigenspace(k).fit(torch.cat(list(source())))
+        else:
+            space = StreamingEigenspace(k, method=kind, max_views=spec.get("max_views", 4096)).fit(source)
+            passes = space.n_passes_
+        seconds = time.perf_counter() - t0
+    return {
+        **spec,
+        "seconds": seconds,
+        "peak_mib": peak.mib,
+        "passes": passes,
+        "baseline_mib": peak.baseline / 2**20,
+        "imports_mib": after_imports / 2**20,
+    }
 
 
 def _measure(spec: dict[str, Any]) -> dict[str, Any]:
@@ -211,19 +276,28 @@ def _measure(spec: dict[str, Any]) -> dict[str, Any]:
     features = result["channels"] * result["size"] ** 2
     result["data_matrix_mib"] = n * features * 4 / 2**20
     result["gram_mib"] = n * n * 8 / 2**20
+    result["block_mib"] = 41 * features * 4 / 2**20
+    panel = min(result.get("max_views", 4096), n) if result["kind"] == "exact" else 41
+    result["panel_mib"] = panel * features * 4 / 2**20 if result["kind"] != "explicit" else 0.0
     return result
 
 
 def bench_scaling(
-    sizes: Sequence[int], objects: Sequence[int], size_objects: int, panel: int
+    sizes: Sequence[int], objects: Sequence[int], size_objects: int, objects_size: int, panel: int
 ) -> dict[str, Any]:
+    """Time and peak memory of explicit / streaming exact / randomized fits, each in a fresh process.
+
+    ``by_size``: ``size_objects`` objects (41 views each) at growing image sides; ``by_objects``:
+    growing numbers of objects at ``objects_size`` x ``objects_size`` (the Gram path when
+    N > P: memory should follow a panel of ``panel`` views plus P², not P·N).
+    """
     by_size = [
         _measure(dict(kind=kind, objects=size_objects, size=s, channels=1, k=15, max_views=panel))
         for s in sizes
         for kind in ("explicit", "exact", "randomized")
     ]
     by_objects = [
-        _measure(dict(kind=kind, objects=n, size=32, channels=1, k=15, max_views=panel))
+        _measure(dict(kind=kind, objects=n, size=objects_size, channels=1, k=15, max_views=panel))
         for n in objects
         for kind in ("explicit", "exact", "randomized")
     ]
@@ -265,13 +339,14 @@ def _plot(results: dict[str, Any], path: str) -> None:
             ("sparse_views_s", "sparse G·C"),
             ("skimage_loop_s", "skimage loop"),
         ):
-            ax.loglog([r["size"] ** 2 for r in w], [r[key] for r in w], "o-", label=label)
+            rows = [r for r in w if key in r]
+            ax.loglog([r["size"] ** 2 for r in rows], [r[key] for r in rows], "o-", label=label)
         ax.set(xlabel="pixels per view", ylabel="seconds", title=f"warp {w[0]['views']} views")
         ax.legend()
     if "scaling" in results:
         for ax, part, xkey, xlabel in (
             (axes[1], "by_size", "size", "image side (pixels)"),
-            (axes[2], "by_objects", "objects", "objects (41 views, 32x32)"),
+            (axes[2], "by_objects", "objects", "objects (41 views each)"),
         ):
             rows = results["scaling"][part]
             for kind in ("explicit", "exact", "randomized"):
@@ -325,8 +400,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if "warp" in args.sections:
         w = results["warp"] = bench_warp([32, 64] if quick else [32, 64, 128, 256], 41, reps)
         for r in w:
-            r["sparse_x"] = r["sparse_views_s"] / r["kornia_s"]
-            r["skimage_x"] = r["skimage_loop_s"] / r["kornia_s"]
+            if not r.get("skipped"):
+                r["sparse_x"] = r["sparse_views_s"] / r["kornia_s"]
+                r["skimage_x"] = r["skimage_loop_s"] / r["kornia_s"]
         print("\n== warp 41 views (2 seed views blended): seconds, and ratio to kornia")
         print(
             _table(
@@ -344,6 +420,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 ],
             )
         )
+        for r in w:
+            if r.get("skipped"):
+                print(
+                    f"  {r['size']}x{r['size']}: sparse G·C and skimage loop skipped (too slow: minutes "
+                    f"beyond {_WARP_SLOW_MAX}x{_WARP_SLOW_MAX}); kornia only"
+                )
 
     if "eigen" in args.sections:
         x, what = coil20_matrix(args.root, quick)
@@ -388,24 +470,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         ("seconds", "seconds", ".3f"),
         ("peak MiB", "peak_mib", ".1f"),
         ("passes", "passes", "d"),
-        ("P·N MiB", "data_matrix_mib", ".1f"),
-        ("P² MiB", "gram_mib", ".1f"),
+        ("P·N·4 MiB", "data_matrix_mib", ".1f"),
+        ("P²·8 MiB", "gram_mib", ".1f"),
+        ("panel MiB", "panel_mib", ".1f"),
     ]
     panel = 205  # views per panel of the exact Gram path (5 objects): memory is a panel plus P²
     if "scaling" in args.sections:
+        objects_size = 64 if quick else 128
         s = results["scaling"] = bench_scaling(
             [32, 64] if quick else [32, 64, 128, 256],
-            [10, 30] if quick else [10, 100, 300, 1000],
+            [5, 10, 20] if quick else [10, 50, 100],
             5 if quick else 20,
+            objects_size,
             panel,
         )
         print(
-            f"\n== scaling: peak memory = ru_maxrss delta in a fresh subprocess; exact = StreamingEigenspace "
-            f"(Gram by panels of {panel} views when N > P, else N×N scatter), randomized = range finder"
+            "\n== scaling: seconds and extra peak resident memory of one fit, each in a fresh subprocess "
+            "(peak RSS sampled every ms, minus the RSS just before the fit; views generated on the fly "
+            f"count). explicit = Eigenspace on the stacked views; exact = StreamingEigenspace (Gram by "
+            f"panels of {panel} views when N > P, else the N×N scatter); randomized = range finder"
         )
         print("-- image size (objects fixed, 41 views each)")
         print(_table(s["by_size"], cols))
-        print("-- number of objects (32x32 views)")
+        print(f"-- number of objects ({objects_size}x{objects_size} views, 41 per object): P = 41 x objects")
         print(_table(s["by_objects"], cols))
 
     if "coil100" in args.sections:
