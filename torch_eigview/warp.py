@@ -90,16 +90,24 @@ def invert_row_map(
     hit = torch.zeros(b * t * h * w, dtype=torch.bool, device=device)
     if w < 2 or not bool(seg_ok.any()):
         return out.view(b, t, h, w), hit.view(b, t, h, w)
-    n_max = math.ceil(float(length[seg_ok].max())) + 1
     first = torch.ceil(f0)
-    # Candidate target columns first + m of each segment, m < n_max: keep those inside the
-    # segment and the image, then work on the kept ones only (one nonzero, no masks).
-    steps = torch.arange(n_max, dtype=dtype, device=device)
-    cols = first[..., None] + steps
-    ok = seg_ok[..., None] & (cols <= f1[..., None]) & (cols >= 0) & (cols <= w - 1)
-    sel = ok.reshape(-1).nonzero().squeeze(1)
-    seg = sel // n_max
-    col = cols.reshape(-1)[sel]
+    # Target columns first + m of each segment that lie inside it and inside the image.
+    # Most segments cover at most one column (views foreshorten), so slot m = 0 runs over
+    # all segments and the further slots only over the few longer ones.
+    room = torch.where(seg_ok, f1 - first, -1.0).reshape(-1)  # slot m exists iff m <= room
+    first_flat = first.reshape(-1)
+    seg_parts, col_parts = [], []
+    cand = (room >= 0).nonzero().squeeze(1)
+    m = 0
+    while cand.numel():
+        col_m = first_flat[cand] + m
+        keep = (col_m >= 0) & (col_m <= w - 1)
+        seg_parts.append(cand[keep])
+        col_parts.append(col_m[keep])
+        m += 1
+        cand = cand[room[cand] >= m]
+    seg = torch.cat(seg_parts)
+    col = torch.cat(col_parts)
     f0s = f0.reshape(-1)[seg]
     frac = (col - f0s) / length.reshape(-1)[seg]
     src = (seg % (w - 1)).to(dtype) + frac
