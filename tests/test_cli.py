@@ -135,27 +135,21 @@ def test_missing_arguments(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 @pytest.mark.coil
-def test_alpha_zero(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["coil", "--root", str(coil_root), "--alpha", "0", "--objects", "1"]
-    code, err = _exit_status(argv, capsys)
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--alpha", "0", "--objects", "1"], "alpha=0.0 must not be a multiple of 180 degrees"),
+        (["--alpha", "10", "--synth", "0", "10", "-1"], "synth step must be positive, got -1.0"),
+        (["--alpha", "10", "--objects", "1,99", "--method", "sparse"], "objects [99] are not in"),
+    ],
+    ids=["alpha_zero", "negative_synth_step", "unknown_object"],
+)
+def test_bad_experiment_arguments(
+    coil_root: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
+) -> None:
+    code, err = _exit_status(["coil", "--root", str(coil_root), *extra], capsys)
     assert code == 2
-    assert "alpha=0.0 must not be a multiple of 180 degrees" in err
-
-
-@pytest.mark.coil
-def test_negative_synth_step(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["coil", "--root", str(coil_root), "--alpha", "10", "--synth", "0", "10", "-1"]
-    code, err = _exit_status(argv, capsys)
-    assert code == 2
-    assert "synth step must be positive, got -1.0" in err
-
-
-@pytest.mark.coil
-def test_unknown_object(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["coil", "--root", str(coil_root), "--alpha", "10", "--objects", "1,99", "--method", "sparse"]
-    code, err = _exit_status(argv, capsys)
-    assert code == 2
-    assert "objects [99] are not in" in err
+    assert message in err
 
 
 @pytest.mark.coil

@@ -185,11 +185,13 @@ def synthesize_views(
         warp = NovelViewWarp(alpha, opts.center, max_stretch=opts.max_stretch, elevation=geo.elevation)
         maps = warp.maps(geo.correspondence, theta[sel] - n * alpha)
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
-        views = warp.apply_maps(maps, pair_seeds)[0]
         if opts.extent:
+            # The foreground mask rides along as one more channel: one warp for both.
             fg = foreground_mask(pair_seeds, opts.background).to(seeds.dtype)[:, :, None]
-            masks = warp.apply_maps(maps, fg)[0, :, 0] > 0.5
-            views = normalize_extent(views, masks)
+            warped = warp.apply_maps(maps, torch.cat([pair_seeds, fg], dim=2))[0]
+            views = normalize_extent(warped[:, :-1], warped[:, -1] > 0.5)
+        else:
+            views = warp.apply_maps(maps, pair_seeds)[0]
         out[sel] = views
         seconds["synthesis"] += time.perf_counter() - t0
     return SynthesizedViews(out, theta, [g.elevation for g in geometry], seconds)
