@@ -7,7 +7,12 @@ import math
 import pytest
 import torch
 
-from torch_eigview.cameras import estimate_elevation, orthographic_coefficients
+from torch_eigview.cameras import (
+    affine_coefficients,
+    estimate_elevation,
+    orthographic_coefficients,
+    rotation_y,
+)
 from torch_eigview.correspondence import Correspondence
 
 ALPHAS = [20.0, -35.0, 5.0, 120.0]
@@ -193,3 +198,79 @@ def test_elevation_errors() -> None:
         estimate_elevation(corr, 0.0)
     with pytest.raises(ValueError, match=r"no trusted correspondence"):
         estimate_elevation(corr, 20.0, mask=torch.zeros(corr.shape, dtype=torch.bool))
+
+
+# --- Sec. 4: the affine camera --------------------------------------------------------
+def _affine_project(cam: torch.Tensor, pts: torch.Tensor, phi_deg: float) -> torch.Tensor:
+    """(N, 2) image points of object points (N, 3) turned by phi: M R(phi) X + t."""
+    r = rotation_y(torch.tensor(math.radians(phi_deg), dtype=torch.float64))
+    return pts @ r.T @ cam[:, :3].T + cam[:, 3]
+
+
+@pytest.mark.parametrize("alpha", ALPHAS)
+@pytest.mark.parametrize("scale", [1.0, 37.5])
+def test_affine_reduces_to_eq7_for_orthographic(alpha: float, scale: float) -> None:
+    cam = torch.tensor([[scale, 0.0, 0.0, 31.5], [0.0, -scale, 0.0, 40.0]], dtype=torch.float64)
+    thetas = [-40.0, 0.0, alpha / 3, alpha, alpha + 25.0]
+    coef = affine_coefficients(cam, alpha, thetas)
+    a, b = orthographic_coefficients(thetas, alpha)
+    torch.testing.assert_close(coef.a, a, rtol=0, atol=1e-12)
+    torch.testing.assert_close(coef.b, b, rtol=0, atol=1e-12)
+    assert coef.center == 31.5 and float(coef.residual.max()) < 1e-12
+
+
+@pytest.mark.parametrize(
+    "matrix", [((40.0, 0.0, 20.0), (0.0, -55.0, 0.0)), ((-30.0, 0.0, 45.0), (0.0, 25.0, 0.0))]
+)
+def test_affine_eq2_holds_for_projected_points(matrix: tuple[tuple[float, ...], ...]) -> None:
+    """A general affine camera whose x does not see the height: Eq. 2 holds for any point."""
+    cam = torch.cat([torch.tensor(matrix, dtype=torch.float64), torch.tensor([[12.0], [-3.0]])], dim=1)
+    pts = torch.randn(50, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    alpha, thetas = 12.0, [-30.0, 5.0, 20.0, 70.0]
+    coef = affine_coefficients(cam, alpha, thetas)
+    x1, x2 = _affine_project(cam, pts, 0.0), _affine_project(cam, pts, alpha)
+    for i, theta in enumerate(thetas):
+        x3 = _affine_project(cam, pts, theta)
+        pred = coef.center + coef.a[i] * (x1[:, 0] - coef.center) + coef.b[i] * (x2[:, 0] - coef.center)
+        torch.testing.assert_close(pred, x3[:, 0], rtol=0, atol=1e-10)
+        torch.testing.assert_close(x3[:, 1], x1[:, 1], rtol=0, atol=1e-10)  # rows stay rows
+    # A (3, 4) affine camera with last row (0, 0, 0, 1) is the same camera.
+    cam34 = torch.cat([cam, torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=torch.float64)])
+    torch.testing.assert_close(affine_coefficients(cam34, alpha, thetas).a, coef.a)
+
+
+def test_affine_residual_is_an_error_where_eq2_cannot_hold() -> None:
+    # x depends on the height Y: m R(theta) keeps M[0, 1], a m + b m R(alpha) scales it by a + b.
+    cam = torch.tensor([[40.0, 8.0, 0.0, 0.0], [0.0, -40.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match=r"Eq\. 2 cannot hold.*residual.*depends on the height"):
+        affine_coefficients(cam, 10.0, [5.0, 20.0])
+    coef = affine_coefficients(cam, 10.0, [5.0, 20.0], tol=math.inf)  # reported, not raised
+    assert float(coef.residual.min()) > 1e-4
+    # A tilted camera: y moves with the rotation, rows do not stay rows.
+    tilt = torch.tensor([[40.0, 0.0, 0.0], [0.0, -38.0, 12.0]])
+    with pytest.raises(ValueError, match=r"rows do not stay rows"):
+        affine_coefficients(tilt, 10.0, [5.0])
+    # At the seed angles the system holds whatever the camera: only y's motion remains.
+    assert float(affine_coefficients(cam, 10.0, [0.0, 10.0], tol=math.inf).residual.max()) < 1e-12
+
+
+def test_affine_bad_input() -> None:
+    good = torch.tensor([[40.0, 0.0, 0.0], [0.0, -40.0, 0.0]])
+    with pytest.raises(ValueError, match=r"camera is singular.*rank 2"):
+        affine_coefficients(torch.tensor([[40.0, 0.0, 0.0], [20.0, 0.0, 0.0]]), 10.0, [5.0])
+    with pytest.raises(ValueError, match=r"camera's first row .* horizontal part"):
+        affine_coefficients(torch.tensor([[0.0, 40.0, 0.0], [0.0, 0.0, 40.0]]), 10.0, [5.0])
+    with pytest.raises(ValueError, match=r"alpha=180.0 must not be a multiple of 180"):
+        affine_coefficients(good, 180.0, [5.0])  # coincident seed cameras
+    with pytest.raises(ValueError, match=r"camera must have shape \(2, 3\), \(2, 4\) or \(3, 4\)"):
+        affine_coefficients(torch.zeros(3, 3), 10.0, [5.0])
+    with pytest.raises(ValueError, match=r"camera of shape \(3, 4\) must be affine"):
+        affine_coefficients(torch.eye(3, 4), 10.0, [5.0])
+    with pytest.raises(ValueError, match=r"camera must be finite"):
+        affine_coefficients(torch.full((2, 3), math.nan), 10.0, [5.0])
+    with pytest.raises(TypeError, match=r"camera must be a torch\.Tensor"):
+        affine_coefficients([[1.0, 0, 0], [0, 1.0, 0]], 10.0, [5.0])  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"camera must have a floating dtype"):
+        affine_coefficients(torch.ones(2, 3, dtype=torch.int64), 10.0, [5.0])
+    with pytest.raises(ValueError, match=r"thetas must hold at least one angle"):
+        affine_coefficients(good, 10.0, [])

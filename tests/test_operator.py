@@ -251,15 +251,94 @@ def test_from_maps_errors() -> None:
         SparseViewOperator.from_maps(images, dataclasses.replace(maps, weight=maps.weight[..., :-1]))
 
 
-def test_from_maps_row_warp_only() -> None:
+def test_from_maps_row_layout_needs_rows_that_stay() -> None:
     images, maps = _setup(torch.float64, 1, 2)
     own_row = torch.arange(H, dtype=torch.float64).view(1, 1, 1, H, 1).expand_as(maps.src_x)
     same = SparseViewOperator.from_maps(images, dataclasses.replace(maps, src_y=own_row.clone()))
+    assert same.layout == "row"
     assert torch.equal(same.views(), SparseViewOperator.from_maps(images, maps).views())
     moved = own_row.clone()
     moved[tuple((maps.weight != 0).nonzero()[-1])] += 0.5
-    with pytest.raises(ValueError, match=r"maps\.src_y must be None or each target pixel's own row"):
-        SparseViewOperator.from_maps(images, dataclasses.replace(maps, src_y=moved))
+    moved_maps = dataclasses.replace(maps, src_y=moved)
+    with pytest.raises(
+        ValueError, match=r"layout='row' needs maps\.src_y None or each target pixel's own row"
+    ):
+        SparseViewOperator.from_maps(images, moved_maps, layout="row")
+    assert SparseViewOperator.from_maps(images, moved_maps).layout == "image"
+    with pytest.raises(ValueError, match=r"layout must be 'auto' or one of"):
+        SparseViewOperator.from_maps(images, maps, layout="rows")
+
+
+def _maps_2d(dtype: torch.dtype, n_sources: int, seed: int = 1) -> WarpMaps:
+    """Smooth 2D target→source maps (a perspective-like warp), partly outside the image."""
+    gen = _generator(seed)
+    t = len(THETAS)
+    yy = torch.arange(H, dtype=torch.float64).view(H, 1).expand(H, W)
+    xx = torch.arange(W, dtype=torch.float64).view(1, W).expand(H, W)
+    src_x, src_y = [], []
+    for _ in range(n_sources * t):
+        p = torch.rand(4, generator=gen, dtype=torch.float64)
+        src_x.append(xx * (0.9 + 0.2 * p[0]) + 2 * torch.sin(yy / 3 + 6 * p[1]) - 0.7)
+        src_y.append(yy * (0.95 + 0.1 * p[2]) + 1.5 * torch.cos(xx / 4 + 6 * p[3]) + 0.3)
+    shape = (n_sources, 1, t, H, W)
+    weight = torch.rand(shape, generator=gen, dtype=torch.float64)
+    weight = weight / weight.sum(0, keepdim=True)
+    weight[..., :2, :3] = 0.0  # some target pixels take nothing
+    sx = torch.stack(src_x).view(shape)
+    sx[weight == 0] = 1e6  # ignored where the weight is zero
+    return WarpMaps(
+        sx.to(dtype),
+        weight.to(dtype),
+        weight > 0,
+        torch.tensor(THETAS),
+        torch.stack(src_y).view(shape).to(dtype),
+    )
+
+
+@pytest.mark.parametrize("n_sources", [1, 2])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_image_layout_equals_kornia_2d_warp(dtype: torch.dtype, channels: int, n_sources: int) -> None:
+    """Sec. 4: whole-image coefficient vectors give exactly the 2D-warped views."""
+    gen = _generator(5)
+    images = torch.rand(n_sources, channels, H, W, generator=gen, dtype=torch.float64).to(dtype)
+    images[0, :, 3] = 0.0  # zeros are not stored in G
+    maps = _maps_2d(dtype, n_sources)
+    expected = NovelViewWarp.apply_maps(maps, images[:, None])[0]
+    op = SparseViewOperator.from_maps(images, maps)
+    n = H * W
+    assert op.layout == "image"
+    assert op.G.shape == (channels * n, n_sources * n * n) and op.C.shape == (n_sources * n * n, len(THETAS))
+    assert op.G.is_coalesced() and op.C.is_coalesced()
+    # At most four bilinear weights per target pixel, source and view.
+    assert op.nnz[1] <= 4 * n * n_sources * len(THETAS)
+    _assert_close(op.views(), expected, dtype)
+
+
+def test_image_layout_matches_a_dense_g() -> None:
+    """The stored G (only the columns C uses) gives the product of the full G of Sec. 4."""
+    gen = _generator(2)
+    h, w = 4, 5
+    n = h * w
+    images = torch.rand(2, 1, h, w, generator=gen, dtype=torch.float64)
+    yy = torch.arange(h, dtype=torch.float64).view(h, 1).expand(h, w)
+    xx = torch.arange(w, dtype=torch.float64).view(1, w).expand(h, w)
+    src_x = (xx * 0.8 + 0.6 + 0.3 * yy).expand(2, 1, 3, h, w).clone()
+    src_y = (yy * 0.9 + 0.2 * xx).expand(2, 1, 3, h, w).clone()
+    weight = torch.full_like(src_x, 0.5)
+    op = SparseViewOperator.from_maps(images, WarpMaps(src_x, weight, weight > 0, torch.zeros(3), src_y))
+    full_g = torch.zeros(n, 2 * n * n, dtype=torch.float64)
+    for p in range(n):
+        for s in range(2):
+            full_g[p, s * n * n + p * n : s * n * n + (p + 1) * n] = images[s, 0].reshape(-1)
+    stored = op.G.to_dense()
+    assert torch.equal(stored[stored != 0], full_g[stored != 0])  # a sub-pattern of the full G
+    torch.testing.assert_close(full_g @ op.C.to_dense(), op.data_matrix(), rtol=0, atol=1e-14)
+    # A target pixel's weights sum to its blend weights (1) where its source lies inside.
+    per_target = op.C.to_dense().view(2, n, n, 3).sum(dim=(0, 2))
+    inside = ((src_x[0, 0] <= w - 1) & (src_y[0, 0] <= h - 1)).reshape(3, n).T
+    assert 0 < int(inside.sum()) < inside.numel()
+    torch.testing.assert_close(per_target[inside], torch.ones_like(per_target[inside]), rtol=0, atol=1e-12)
+    assert bool((per_target[~inside] < 1 - 1e-6).all())
 
 
 def test_from_forward_map_errors() -> None:
@@ -309,3 +388,57 @@ def test_matches_kornia_at_coil_size_float32() -> None:
     expected = warp.apply_maps(maps, images[:, None])[0]
     actual = SparseViewOperator.from_maps(images, maps).views()
     assert float((actual - expected).abs().max()) <= 1e-5
+
+
+# --------------------------------------------------------------- Sec. 4.1: common factor
+def _pair_ops(images: torch.Tensor, layout: str) -> list[SparseViewOperator]:
+    """Operators of the consecutive seed pairs (0, 1) and (1, 2) of three seed views."""
+    ops = []
+    for n in range(images.shape[0] - 1):
+        gen = _generator(10 + n)
+        d12 = _smooth_disparity(gen, 2.0, images.dtype)
+        maps = NovelViewWarp(ALPHA).maps(correspondence_from_disparity(d12, -d12), THETAS[:4])
+        ops.append(SparseViewOperator.from_maps(images[n : n + 2], maps, layout=layout))
+    return ops
+
+
+@pytest.mark.parametrize("layout", ["row", "image"])
+@pytest.mark.parametrize("channels", [1, 2])
+def test_common_factor_equals_direct_form_with_full_row_rank(layout: str, channels: int) -> None:
+    images = torch.rand(3, channels, H, W, generator=_generator(3), dtype=torch.float64) + 0.1
+    ops = _pair_ops(images, layout)
+    direct = SparseViewOperator.concat(ops)
+    common = SparseViewOperator.common_factor(ops)
+    assert ops[0].full_row_rank()
+    assert common.G is ops[0].G and common.n_views == direct.n_views == 8
+    assert common.C.shape == (ops[0].G.shape[1], 8)
+    torch.testing.assert_close(common.data_matrix(), direct.data_matrix(), rtol=0, atol=1e-12)
+    # The first pair's columns are C1 itself; the others are denser.
+    assert torch.equal(common.C.to_dense()[:, :4], ops[0].C.to_dense())
+
+
+def test_common_factor_needs_full_row_rank() -> None:
+    """An all-black row in the first pair's seeds (COIL's background) breaks the rank."""
+    images = torch.rand(3, 1, H, W, generator=_generator(4), dtype=torch.float64) + 0.1
+    images[:2, :, 2] = 0.0  # row 2 black in both seeds of the first pair only
+    ops = _pair_ops(images, "row")
+    assert not ops[0].full_row_rank() and ops[1].full_row_rank()
+    direct = SparseViewOperator.concat(ops).views()
+    common = SparseViewOperator.common_factor(ops).views()
+    # Row 2 of the second pair's views holds the third seed's content, which G1 cannot
+    # span: the common form zeroes it; every other row agrees.
+    assert float(direct[4:, :, 2].abs().max()) > 0.1
+    assert float(common[4:, :, 2].abs().max()) == 0.0
+    keep = torch.ones(H, dtype=torch.bool)
+    keep[2] = False
+    torch.testing.assert_close(common[:, :, keep], direct[:, :, keep], rtol=0, atol=1e-12)
+    # Black in every seed (a background row of all views): rank-deficient, yet equal.
+    images[2, :, 2] = 0.0
+    ops = _pair_ops(images, "row")
+    assert not ops[0].full_row_rank()
+    torch.testing.assert_close(
+        SparseViewOperator.common_factor(ops).views(),
+        SparseViewOperator.concat(ops).views(),
+        rtol=0,
+        atol=1e-12,
+    )

@@ -21,6 +21,20 @@ Two ways to fill C:
       forward map x3 of each source pixel k, ``y_k = 1 − |x3_k − l|`` where below 1.
       It is not normalized: where the forward map stretches or folds a row, a target
       pixel's coefficients do not sum to 1.
+
+2D warps (Sec. 4, perspective cameras; ``layout="image"``):
+    When rows move, a target pixel's coefficient vector spans the whole image: G is
+    (C·H·W, S·(H·W)²) with row ``(c, p)`` holding all of ``I_s[c]`` in column block
+    ``(s, p)``, ``G[(c, p), (s, p, q)] = I_s[c, q]`` (column ``s·(H·W)² + p·H·W + q``),
+    and column t of C holds at rows ``(s, p, q)`` the 2D bilinear weights of grid
+    sampling (four per target pixel). Stored in full, G would hold C·S·(H·W)² values
+    (2.7e8 at 128²), so only its columns that C uses are stored: every other column of
+    G meets a zero row of C, and G·C is the same product.
+
+More than two seed views (Sec. 4.1): :meth:`SparseViewOperator.concat` of the seed
+pairs' operators is the direct form A = [G1C1 … G(m−1)C(m−1)];
+:meth:`SparseViewOperator.common_factor` the paper's G1·[C1, C̃2, …] with
+C̃n = G1⁺·Gn·Cn, equal to it exactly when G1 has full row rank.
 """
 
 from __future__ import annotations
@@ -37,6 +51,7 @@ from torch_eigview.warp import WarpMaps
 __all__ = ["SparseViewOperator"]
 
 _MODES = ("gather",)
+LAYOUTS = ("row", "image")
 
 
 def _seed_matrix(images: torch.Tensor) -> torch.Tensor:
@@ -87,6 +102,50 @@ def _gather_coefficients(src_x: torch.Tensor, weight: torch.Tensor) -> torch.Ten
     return _sparse(rows[keep], cols[keep], tent[keep], (s * h * w * w, t))
 
 
+def _gather_coefficients_2d(src_x: torch.Tensor, src_y: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """C (S·(H·W)², T) of a 2D warp from maps and blend weights, all (S, T, H, W).
+
+    Four bilinear weights per target pixel p at its source position (x, y): rows
+    ``(s, p, q)`` for the source pixels q = (y0 + dy, x0 + dx) inside the image.
+    """
+    s, t, h, w = src_x.shape
+    dev = src_x.device
+    n = h * w
+    use = weight != 0
+    # The pixel -> normalized -> pixel round trip of kornia's remap, as in the row case.
+    x = torch.where(use, src_x, 0.0).clamp(-2.0, w + 1.0)
+    y = torch.where(use, src_y, 0.0).clamp(-2.0, h + 1.0)
+    x = ((2.0 / (w - 1)) * x - 1 + 1) * ((w - 1) / 2) if w > 1 else x
+    y = ((2.0 / (h - 1)) * y - 1 + 1) * ((h - 1) / 2) if h > 1 else y
+    x0, y0 = x.floor(), y.floor()
+    fx, fy = x - x0, y - y0
+    xs = torch.stack([x0, x0 + 1, x0, x0 + 1], dim=-1)  # (S, T, H, W, 4)
+    ys = torch.stack([y0, y0, y0 + 1, y0 + 1], dim=-1)
+    tent = torch.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], dim=-1)
+    tent = tent * weight[..., None]
+    keep = use[..., None] & (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1) & (tent != 0)
+    block = torch.arange(s, device=dev).view(s, 1, 1, 1, 1) * (n * n)
+    p = torch.arange(n, device=dev).view(1, 1, h, w, 1)
+    rows = block + p * n + ys.long() * w + xs.long()
+    cols = torch.arange(t, device=dev).view(1, t, 1, 1, 1).expand_as(rows)
+    return _sparse(rows[keep], cols[keep], tent[keep], (s * n * n, t))
+
+
+def _image_seed_matrix(images: torch.Tensor, c_mat: torch.Tensor) -> torch.Tensor:
+    """G (C·H·W, S·(H·W)²) of the whole-image layout, stored at the columns C uses."""
+    s, ch, h, w = images.shape
+    n = h * w
+    used = c_mat.indices()[0].unique()  # sorted
+    src, rem = used // (n * n), used % (n * n)
+    p, q = rem // n, rem % n
+    flat = images.reshape(s, ch, n)
+    values = flat[src, :, q].T  # (C, U)
+    rows = torch.arange(ch, device=images.device)[:, None] * n + p[None]
+    cols = used[None].expand(ch, -1)
+    keep = values != 0
+    return _sparse(rows[keep], cols[keep], values[keep], (ch * n, s * n * n))
+
+
 def _splat_coefficients(dst_x_for_src: torch.Tensor) -> torch.Tensor:
     """C (H·W·W, T) from the forward map x3 (T, H, W) of each source pixel; NaN: no target."""
     t, h, w = dst_x_for_src.shape
@@ -105,6 +164,20 @@ def _splat_coefficients(dst_x_for_src: torch.Tensor) -> torch.Tensor:
     return _sparse(rows[keep], cols[keep], y[keep], (h * w * w, t))
 
 
+def _gram_blocks(op: SparseViewOperator) -> torch.Tensor:
+    """(H·W, C, C) blocks of G·Gᵀ, one per target pixel (G's rows of different pixels
+    share no column, in either layout)."""
+    ch, h, w = op.image_shape
+    n = h * w
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Sparse CSR tensor support is in beta")
+        gram = torch.sparse.mm(op.G, op.G.t().coalesce()).coalesce()
+    (r1, r2), v = gram.indices(), gram.values()
+    blocks = torch.zeros(n, ch, ch, dtype=op.G.dtype, device=op.G.device)
+    blocks.index_put_((r1 % n, r1 // n, r2 // n), v, accumulate=True)
+    return blocks
+
+
 @dataclass(frozen=True, eq=False, repr=False)
 class SparseViewOperator:
     """Synthesized views as the sparse product A = G·C (Eqs. 3–6).
@@ -114,6 +187,7 @@ class SparseViewOperator:
         C: (M, T) coalesced sparse COO tensor, one column per synthesized view.
         image_shape: (C, H, W) of a view.
         n_views: T, the number of columns of C (all objects together after :meth:`concat`).
+        layout: ``"row"`` (M = S·H·W·W) or ``"image"`` (M = S·(H·W)², Sec. 4's 2D warps).
 
     Example:
         >>> from torch_eigview.correspondence import correspondence_from_disparity
@@ -129,9 +203,12 @@ class SparseViewOperator:
     C: torch.Tensor
     image_shape: tuple[int, int, int]
     n_views: int
+    layout: str = "row"
 
     @classmethod
-    def from_maps(cls, images: torch.Tensor, maps: WarpMaps, mode: str = "gather") -> SparseViewOperator:
+    def from_maps(
+        cls, images: torch.Tensor, maps: WarpMaps, mode: str = "gather", layout: str = "auto"
+    ) -> SparseViewOperator:
         """Builds G·C for one object from the target→source maps of the warp.
 
         Args:
@@ -139,9 +216,12 @@ class SparseViewOperator:
             maps: :class:`~torch_eigview.warp.WarpMaps` with ``src_x`` and ``weight`` of
                 shape (S, 1, T, H, W) (B = 1). ``src_x`` must be finite where ``weight`` is
                 non-zero; entries of zero weight are left out of C whatever their ``src_x``.
-                A row warp only: ``src_y`` None or every target pixel's own row.
+                ``src_y`` (same shape) when rows move.
             mode: ``"gather"``, the bilinear tent weights of kornia's ``remap``; for the
                 literal forward (splat) form of Eq. 4 use :meth:`from_forward_map`.
+            layout: ``"row"`` (Eqs. 3–6: a coefficient vector per row, rows must not
+                move), ``"image"`` (Sec. 4: whole-image coefficient vectors, any 2D
+                warp) or ``"auto"``: ``"row"`` unless ``maps.src_y`` moves rows.
 
         Returns:
             The operator, with ``views()`` (T, C, H, W) in the dtype of ``images``.
@@ -174,20 +254,38 @@ class SparseViewOperator:
                 f"images must have shape (S, C, H, W) = ({s}, C, {h}, {w}) to match maps.src_x "
                 f"{tuple(src_x.shape)}, got {tuple(imgs.shape)}"
             )
+        rows_move = False
         if maps.src_y is not None:
-            own_row = torch.arange(h, device=maps.src_y.device).view(1, 1, 1, h, 1)
-            if not bool(((maps.src_y == own_row) | (weight == 0)).all()):
+            src_y = check_float_tensor(maps.src_y, "maps.src_y")
+            if src_y.shape != src_x.shape:
                 raise ValueError(
-                    "maps.src_y must be None or each target pixel's own row (G·C of Eqs. 3–6 warps "
-                    "row by row), got rows that move (a tilted camera): use NovelViewWarp.apply_maps"
+                    f"maps.src_y must have the shape of maps.src_x {tuple(src_x.shape)}, got {tuple(src_y.shape)}"
                 )
+            own_row = torch.arange(h, device=src_y.device).view(1, 1, 1, h, 1)
+            rows_move = not bool(((src_y == own_row) | (weight == 0)).all())
+        if layout not in LAYOUTS and layout != "auto":
+            raise ValueError(f"layout must be 'auto' or one of {LAYOUTS}, got {layout!r}")
+        if layout == "row" and rows_move:
+            raise ValueError(
+                "layout='row' needs maps.src_y None or each target pixel's own row (Eqs. 3–6 warp "
+                "row by row), got rows that move: use layout='image' (Sec. 4's whole-image vectors)"
+            )
+        use_image = layout == "image" or (layout == "auto" and rows_move)
         check_finite(weight, "maps.weight")
         check_finite(src_x[weight != 0], "maps.src_x (where maps.weight is non-zero)")
         # The maps are cast to the image dtype first, as NovelViewWarp.apply_maps does.
-        src_x = src_x[:, 0].to(device=imgs.device, dtype=imgs.dtype)
-        weight = weight[:, 0].to(device=imgs.device, dtype=imgs.dtype)
-        c_mat = _gather_coefficients(src_x.detach(), weight.detach())
-        return cls(_seed_matrix(imgs.detach()), c_mat, (imgs.shape[1], h, w), t)
+        src_x = src_x[:, 0].to(device=imgs.device, dtype=imgs.dtype).detach()
+        weight = weight[:, 0].to(device=imgs.device, dtype=imgs.dtype).detach()
+        shape = (imgs.shape[1], h, w)
+        if not use_image:
+            return cls(_seed_matrix(imgs.detach()), _gather_coefficients(src_x, weight), shape, t)
+        if maps.src_y is None:
+            src_y = torch.arange(h, dtype=imgs.dtype, device=imgs.device).view(1, 1, h, 1).expand_as(src_x)
+        else:
+            check_finite(maps.src_y[maps.weight != 0], "maps.src_y (where maps.weight is non-zero)")
+            src_y = maps.src_y[:, 0].to(device=imgs.device, dtype=imgs.dtype).detach()
+        c_mat = _gather_coefficients_2d(src_x, src_y, weight)
+        return cls(_image_seed_matrix(imgs.detach(), c_mat), c_mat, shape, t, "image")
 
     @classmethod
     def from_forward_map(cls, image: torch.Tensor, dst_x_for_src: torch.Tensor) -> SparseViewOperator:
@@ -253,6 +351,8 @@ class SparseViewOperator:
                 raise TypeError(f"ops[{i}] has dtype {op.G.dtype}, ops[0] has {ops[0].G.dtype}")
             if op.G.device != ops[0].G.device:
                 raise ValueError(f"ops[{i}] is on {op.G.device}, ops[0] on {ops[0].G.device}")
+            if op.layout != ops[0].layout:
+                raise ValueError(f"ops[{i}].layout={op.layout!r} must equal ops[0].layout={ops[0].layout!r}")
         g_idx, g_val, c_idx, c_val = [], [], [], []
         m_off = t_off = 0
         for op in ops:
@@ -270,7 +370,53 @@ class SparseViewOperator:
         c = torch.sparse_coo_tensor(
             torch.cat(c_idx, 1), torch.cat(c_val), (m_off, t_off), is_coalesced=True, check_invariants=False
         )
-        return cls(g, c, ops[0].image_shape, t_off)
+        return cls(g, c, ops[0].image_shape, t_off, ops[0].layout)
+
+    @classmethod
+    def common_factor(cls, ops: Sequence[SparseViewOperator]) -> SparseViewOperator:
+        """Sec. 4.1's common-factor form of one object's seed pairs: G1·[C1, C̃2, …].
+
+        ``ops[n]`` is the operator of the (n + 1)-th consecutive seed pair; the direct form
+        is ``concat(ops)`` = [G1C1 … Gm−1Cm−1]. Here G1 is brought out as the common
+        factor: ``C̃n = G1⁺·Gn·Cn`` with the pseudo-inverse ``G1⁺ = G1ᵀ(G1G1ᵀ)⁺``, so that
+        ``G1·C̃n = P·Gn·Cn`` with P the projector onto the range of G1G1ᵀ. Hence the
+        two forms are equal when G1 has full row rank (:meth:`full_row_rank`): in the row
+        layout, when every image row (all channels together) of the first pair's seed
+        views is non-zero; in the image layout (G stored at the columns C uses), when
+        every target pixel of the first pair samples some non-zero seed pixel. A
+        seed pair whose views share an all-black row (COIL's background) loses rank, and
+        then the common form keeps only what the other pairs put in rows that G1 spans:
+        a zero row of G1 forces a zero row of G1·C̃n.
+
+        G1G1ᵀ is block diagonal (a C×C block per target pixel), so G1⁺ costs little,
+        but C̃n is dense wherever the first pair's seeds are non-zero: it stores about
+        S·W (row layout) or S·H·W (image layout) values per pixel and view, against
+        the direct form's few. It is the paper's algebra, for small images and for
+        checking; the direct form is the default everywhere else.
+
+        Raises:
+            TypeError, ValueError: as :meth:`concat`.
+        """
+        direct = cls.concat(ops)  # validates ops
+        first = ops[0]
+        blocks = _gram_blocks(first)
+        pinv = torch.linalg.pinv(blocks)  # (H·W, C, C)
+        ch, h, w = first.image_shape
+        n = h * w
+        parts = [first.C]
+        for op in ops[1:]:
+            a_n = op.data_matrix()  # (C·H·W, T_n)
+            z = torch.einsum("pcd,dpt->cpt", pinv, a_n.view(ch, n, -1)).reshape(ch * n, -1)
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", "Sparse CSR tensor support is in beta")
+                parts.append(torch.sparse.mm(first.G.t().coalesce(), z).to_sparse())
+        c = torch.cat([p.coalesce() for p in parts], dim=1).coalesce()
+        return cls(first.G, c, first.image_shape, direct.n_views, first.layout)
+
+    def full_row_rank(self) -> bool:
+        """Whether G has full row rank (every C×C block of G·Gᵀ is non-singular)."""
+        blocks = _gram_blocks(self)
+        return bool((torch.linalg.matrix_rank(blocks) == blocks.shape[-1]).all())
 
     @property
     def nnz(self) -> tuple[int, int]:
@@ -292,5 +438,6 @@ class SparseViewOperator:
         nnz_g, nnz_c = self.nnz
         return (
             f"SparseViewOperator(image_shape={self.image_shape}, n_views={self.n_views}, "
-            f"G={tuple(self.G.shape)} nnz={nnz_g}, C={tuple(self.C.shape)} nnz={nnz_c}, dtype={self.G.dtype})"
+            f"G={tuple(self.G.shape)} nnz={nnz_g}, C={tuple(self.C.shape)} nnz={nnz_c}, "
+            f"layout={self.layout!r}, dtype={self.G.dtype})"
         )

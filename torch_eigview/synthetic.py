@@ -129,6 +129,11 @@ class AffineCamera(_Camera):
         origin = uv @ self._pinv.T  # minimum-norm point: origin ⟂ direction
         return origin, self._dir.expand_as(origin)
 
+    @property
+    def P(self) -> torch.Tensor:
+        """(2, 4) affine camera matrix ``[M | offset]`` (float64) of the view at θ = 0."""
+        return torch.cat([self._m, self._off[:, None]], dim=1)
+
     def project(self, pc: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         uv = pc @ self._m.T + self._off
         return uv[..., 0], uv[..., 1], pc @ self._dir
@@ -458,7 +463,7 @@ def exact_correspondence(
     maps = []
     w = cam.width
     cols = torch.arange(w, dtype=_DT).expand(cam.height, w)
-    c = (w - 1) / 2
+    c = float(cam._off[0])  # the column of the rotation axis
     for ta, tb in ((theta_1, theta_1 + alpha), (theta_1 + alpha, theta_1)):
         corr = view_correspondence(obj, ta, tb, cam)
         plane = (cols - c) * (math.cos(math.radians(tb - ta)) - 1)

@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from kornia.geometry.transform import remap
 
-from torch_eigview.cameras import orthographic_coefficients
+from torch_eigview.cameras import affine_coefficients, orthographic_coefficients
 from torch_eigview.correspondence import Correspondence
 from torch_eigview.errors import as_angle_tensor, check_alpha, check_float_tensor, check_ndim, check_number
 
@@ -260,6 +260,11 @@ class NovelViewWarp(torch.nn.Module):
             With a tilt, points also move vertically (``y = K - sin(elevation) (Z cos(phi)
             - X sin(phi))``) and the maps become 2D; :func:`estimate_elevation` measures
             it from a 2D flow (COIL's camera looks down on the turntable).
+        camera: optional affine camera of the first seed view, (2, 3), (2, 4) ``[M | t]``
+            or (3, 4) (Sec. 4's affine camera): a and b are then solved from it by
+            :func:`~torch_eigview.cameras.affine_coefficients` (which refuses a camera
+            for which Eq. 2 cannot hold) and ``center`` defaults to its axis column
+            ``t[0]``. None: the orthographic camera, Eq. 7.
 
     Example:
         >>> warp = NovelViewWarp(alpha=5.0)
@@ -276,6 +281,7 @@ class NovelViewWarp(torch.nn.Module):
         max_stretch: float = 3.0,
         depth_sign: float | str = "auto",
         elevation: float = 0.0,
+        camera: torch.Tensor | None = None,
     ) -> None:
         super().__init__()
         self.alpha = check_alpha(alpha)
@@ -292,11 +298,17 @@ class NovelViewWarp(torch.nn.Module):
         self.elevation = check_number(elevation, "elevation")
         if not (math.isfinite(self.elevation) and abs(self.elevation) < 90):
             raise ValueError(f"elevation={elevation} must be an angle in degrees in (-90, 90)")
+        self.camera: torch.Tensor | None = None
+        if camera is not None:
+            affine_coefficients(camera, self.alpha, [0.0])  # validates the camera now
+            if self.elevation != 0.0:
+                raise ValueError(f"elevation={elevation} must be 0 with an affine camera (its rows stay rows)")
+            self.camera = camera.detach().to(torch.float64).clone()
 
     def extra_repr(self) -> str:
         return (
             f"alpha={self.alpha}, center={self.center}, elevation={self.elevation}, "
-            f"max_stretch={self.max_stretch}"
+            f"max_stretch={self.max_stretch}" + ("" if self.camera is None else ", camera=affine")
         )
 
     def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
@@ -321,13 +333,16 @@ class NovelViewWarp(torch.nn.Module):
                 f"thetas must lie within (-90, 90) degrees of the first seed view, got {theta.tolist()}: "
                 "beyond that the seed views show the object's other side"
             )
-        a, b = (
-            v.to(dtype=dtype, device=device).view(1, -1, 1, 1)
-            for v in orthographic_coefficients(theta, self.alpha)
-        )
-        th = torch.deg2rad(theta).to(dtype=dtype, device=device).view(1, -1, 1, 1)
         _, _, w = correspondence.shape
         c = (w - 1) / 2 if self.center is None else self.center
+        if self.camera is None:
+            coefficients = orthographic_coefficients(theta, self.alpha)
+        else:
+            affine = affine_coefficients(self.camera, self.alpha, theta)
+            coefficients = (affine.a, affine.b)
+            c = affine.center if self.center is None else c
+        a, b = (v.to(dtype=dtype, device=device).view(1, -1, 1, 1) for v in coefficients)
+        th = torch.deg2rad(theta).to(dtype=dtype, device=device).view(1, -1, 1, 1)
         cols = torch.arange(w, dtype=dtype, device=device).expand_as(d12)
         sign = self._depth_sign(cols - c, cols + d12 - c, correspondence.valid_12)
         geo = _Geometry(a, b, th, c, math.radians(self.alpha), sign, self.max_stretch, self._tilt)
