@@ -7,6 +7,7 @@ import time
 
 import pytest
 import torch
+from helpers import warp_errors
 
 from torch_eigview import NovelViewWarp, estimate_correspondence
 from torch_eigview.synthetic import (
@@ -121,22 +122,8 @@ def test_exact_correspondence_projects_points(cam_name: str) -> None:
         assert float(gap.median()) > 0.05
 
 
-def _warp_errors(obj: object, camera: object, corr: object, warp: NovelViewWarp | None = None) -> list[float]:
-    r1, r2 = render(obj, 0.0, camera), render(obj, ALPHA, camera)
-    warp = NovelViewWarp(ALPHA) if warp is None else warp
-    views = warp(r1.image, r2.image, correspondence=corr, thetas=THETAS)
-    errors = []
-    for i, theta in enumerate(THETAS):
-        truth = render(obj, theta, camera)
-        seen1 = view_correspondence(obj, theta, 0.0, camera, view_a=truth).visible
-        seen2 = view_correspondence(obj, theta, ALPHA, camera, view_a=truth).visible
-        both = truth.mask & seen1 & seen2
-        errors.append(float((views[i, 0] - truth.image[0]).abs()[both].mean()))
-    return errors
-
-
 def test_warp_with_exact_correspondences_matches_render(obj: object, camera: object) -> None:
-    errors = _warp_errors(obj, camera, exact_correspondence(obj, ALPHA, camera))
+    errors = warp_errors(ALPHA, THETAS, obj, camera, exact_correspondence(obj, ALPHA, camera))
     print(f"exact correspondences, mean abs error per angle {THETAS}: {[f'{e:.4f}' for e in errors]}")
     # The paper: under 1% per pixel; measured about 0.2-0.5% (range of intensities is [0, 1]).
     assert max(errors) < 0.01
@@ -147,7 +134,7 @@ def test_affine_camera_warp_matches_render(obj: object) -> None:
     s = 0.45 * SIZE
     camera = AffineCamera(((0.9 * s, 0.0, 0.15 * s), (0.0, -1.05 * s, 0.0)), SIZE, offset=(30.0, 33.0))
     warp = NovelViewWarp(ALPHA, camera=camera.P)  # a, b and the axis column from the camera
-    errors = _warp_errors(obj, camera, exact_correspondence(obj, ALPHA, camera), warp)
+    errors = warp_errors(ALPHA, THETAS, obj, camera, exact_correspondence(obj, ALPHA, camera), warp)
     print(
         f"affine camera, exact correspondences, mean abs error per angle {THETAS}: {[f'{e:.4f}' for e in errors]}"
     )
@@ -157,7 +144,7 @@ def test_affine_camera_warp_matches_render(obj: object) -> None:
 
 def test_warp_with_flow_correspondences(obj: object, camera: object) -> None:
     r1, r2 = render(obj, 0.0, camera), render(obj, ALPHA, camera)
-    errors = _warp_errors(obj, camera, estimate_correspondence(r1.image, r2.image))
+    errors = warp_errors(ALPHA, THETAS, obj, camera, estimate_correspondence(r1.image, r2.image))
     print(f"flow correspondences, mean abs error per angle {THETAS}: {[f'{e:.4f}' for e in errors]}")
     assert max(errors) < 0.03
 
@@ -214,3 +201,30 @@ def test_demo_small(tmp_path: object) -> None:
     result = recognition_experiment(10.0, 2, scene=scene, correspondences="exact", test=(-10.0, 10.0))
     assert result["n_test"] == 42 and result["n_gallery"] == 82
     assert result["accuracy"] == 100.0
+
+
+@pytest.mark.parametrize("camera", ["affine", "perspective"])
+def test_synth_protocol_per_camera(camera: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`eigview synth --camera`: Fig. 2's protocol with each camera model's synthesis."""
+    from torch_eigview.demo import run_synth
+
+    out = run_synth(
+        camera, [10.0], [2], size=40, shapes=("egg", "cylinder"), test=(-20.0, 20.0), error_thetas=(-5.0, 4.0)
+    )
+    (record,) = out["results"]  # type: ignore[misc]
+    assert record["n_test"] == 82 and record["accuracy"] >= 95.0
+    errors = [e for errs in out["synthesis_error"].values() for e in errs]  # type: ignore[attr-defined]
+    assert len(errors) == 4 and max(errors) < 0.02
+    printed = capsys.readouterr().out
+    assert f"camera model: {camera}" in printed and "per-pixel mean abs error" in printed
+
+
+def test_synth_cli_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
+    from torch_eigview.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["synth", "--camera", "fisheye"])
+    assert info.value.code == 2 and "invalid choice: 'fisheye'" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        main(["synth", "--shapes", "head,teapot"])
+    assert info.value.code == 2 and "--shapes has unknown shape(s) ['teapot']" in capsys.readouterr().err

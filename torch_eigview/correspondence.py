@@ -38,6 +38,8 @@ class Correspondence:
         vertical_12: (B, H, W) ``y2 - y1`` measured by a 2D flow, or None. The
             orthographic model does not use it; :func:`torch_eigview.cameras.estimate_elevation`
             measures a tilted camera from it.
+        vertical_21: (B, H, W) ``y1 - y2`` of view-2 pixels, or None (used by the
+            perspective camera, whose points move in both coordinates).
     """
 
     disparity_12: torch.Tensor
@@ -45,6 +47,7 @@ class Correspondence:
     valid_12: torch.Tensor
     valid_21: torch.Tensor
     vertical_12: torch.Tensor | None = None
+    vertical_21: torch.Tensor | None = None
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -62,6 +65,7 @@ class Correspondence:
             self.valid_12.to(device=device),
             self.valid_21.to(device=device),
             None if self.vertical_12 is None else self.vertical_12.to(device=device, dtype=dtype),
+            None if self.vertical_21 is None else self.vertical_21.to(device=device, dtype=dtype),
         )
 
 
@@ -178,17 +182,19 @@ def estimate_correspondence(
     if v1.ndim == 3:
         v1, v2 = v1[None], v2[None]
     flow = optical_flow_tvl1 if method == "tvl1" else optical_flow_ilk
-    d12, d21, v12 = [], [], []
+    d12, d21, v12, v21 = [], [], [], []
     for a, b in zip(v1, v2, strict=True):
         ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
         # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
         fwd = flow(ga, gb, **flow_kwargs)
         d12.append(fwd[1])
         v12.append(fwd[0])
-        d21.append(flow(gb, ga, **flow_kwargs)[1])
+        bwd = flow(gb, ga, **flow_kwargs)
+        d21.append(bwd[1])
+        v21.append(bwd[0])
 
     def tensor(arrays: list[np.ndarray]) -> torch.Tensor:
         return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)
 
     corr = correspondence_from_disparity(tensor(d12), tensor(d21), threshold=threshold)
-    return dataclasses.replace(corr, vertical_12=tensor(v12))
+    return dataclasses.replace(corr, vertical_12=tensor(v12), vertical_21=tensor(v21))

@@ -39,6 +39,7 @@ __all__ = [
     "SyntheticObject",
     "ViewCorrespondence",
     "exact_correspondence",
+    "exact_correspondence_2d",
     "make_camera",
     "make_object",
     "render",
@@ -471,3 +472,29 @@ def exact_correspondence(
         maps.append((disparity.to(torch.float32), corr.mask_a))
     (d12, v12), (d21, v21) = maps
     return correspondence_from_disparity(d12, d21, valid_12=v12, valid_21=v21)
+
+
+def exact_correspondence_2d(
+    obj: SyntheticObject, alpha: float, camera: _Camera, *, theta_1: float = 0.0
+) -> Correspondence:
+    """The exact 2D :class:`~torch_eigview.correspondence.Correspondence` of seed views θ1 and θ1 + α.
+
+    For any camera (points may move in both coordinates, as with
+    :class:`PerspectiveCamera`): ``disparity``/``vertical`` hold the column and row
+    shifts of each foreground pixel's surface point, both directions; foreground pixels
+    are valid, the background has zero shift and is invalid.
+
+    Returns:
+        A (1, H, W) float32 :class:`Correspondence` with ``vertical_12`` and ``vertical_21``.
+    """
+    cam = _check_camera(camera)
+    check_number(alpha, "alpha")
+    x, y = _pixel_grid(cam)
+    out = []
+    for ta, tb in ((theta_1, theta_1 + alpha), (theta_1 + alpha, theta_1)):
+        corr = view_correspondence(obj, ta, tb, cam)
+        dx = torch.where(corr.mask_a, corr.x_b - x, 0.0).to(torch.float32)
+        dy = torch.where(corr.mask_a, corr.y_b - y, 0.0).to(torch.float32)
+        out.append((dx[None], dy[None], corr.mask_a[None]))
+    (d12, v12, m12), (d21, v21, m21) = out
+    return Correspondence(d12, d21, m12, m21, v12, v21)
