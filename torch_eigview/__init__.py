@@ -13,7 +13,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from torch_eigview.cameras import estimate_elevation, orthographic_coefficients
+    from torch_eigview.cameras import affine_coefficients, estimate_elevation, orthographic_coefficients
     from torch_eigview.correspondence import (
         Correspondence,
         correspondence_from_disparity,
@@ -29,7 +29,9 @@ if TYPE_CHECKING:
     from torch_eigview.kernel_projection import KernelProjection
     from torch_eigview.normalize import foreground_mask, normalize_extent
     from torch_eigview.operator import SparseViewOperator
+    from torch_eigview.perspective import PerspectiveWarp
     from torch_eigview.projection import EigenProjection
+    from torch_eigview.raster import invert_map_2d
     from torch_eigview.recognition import NearestNeighborRecognizer, Recognition
     from torch_eigview.streaming import StreamingEigenspace, blocks_of
     from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
@@ -38,11 +40,18 @@ if TYPE_CHECKING:
         OrthographicCamera,
         PerspectiveCamera,
         exact_correspondence,
+        exact_correspondence_2d,
         make_camera,
         make_object,
         render,
         render_views,
         view_correspondence,
+    )
+    from torch_eigview.trifocal import (
+        novel_view_tensor,
+        novel_view_tensor_from_cameras,
+        transfer_points,
+        trifocal_tensor,
     )
     from torch_eigview.warp import NovelViewWarp, WarpMaps
 
@@ -52,6 +61,14 @@ __version__ = "0.1.0"
 _SOURCES = {
     "estimate_elevation": "cameras",
     "orthographic_coefficients": "cameras",
+    "affine_coefficients": "cameras",
+    "PerspectiveWarp": "perspective",
+    "invert_map_2d": "raster",
+    "trifocal_tensor": "trifocal",
+    "novel_view_tensor": "trifocal",
+    "novel_view_tensor_from_cameras": "trifocal",
+    "transfer_points": "trifocal",
+    "exact_correspondence_2d": "synthetic",
     "Correspondence": "correspondence",
     "correspondence_from_disparity": "correspondence",
     "estimate_correspondence": "correspondence",
@@ -105,29 +122,37 @@ __all__ = [
     "NovelViewWarp",
     "OrthographicCamera",
     "PerspectiveCamera",
+    "PerspectiveWarp",
     "Recognition",
     "SparseViewOperator",
     "StreamingEigenspace",
     "SynthesisOptions",
     "SynthesizedViews",
     "WarpMaps",
+    "affine_coefficients",
     "blocks_of",
     "correspondence_from_disparity",
     "estimate_correspondence",
     "estimate_elevation",
     "exact_correspondence",
+    "exact_correspondence_2d",
     "fit_distributed",
     "foreground_mask",
+    "invert_map_2d",
     "load_recognizer",
     "make_camera",
     "make_object",
     "normalize_extent",
+    "novel_view_tensor",
+    "novel_view_tensor_from_cameras",
     "orthographic_coefficients",
     "parse_object_spec",
     "render",
     "render_views",
     "save_recognizer",
     "synthesize_views",
+    "transfer_points",
+    "trifocal_tensor",
     "view_correspondence",
 ]
 

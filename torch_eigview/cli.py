@@ -107,6 +107,18 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
     demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    synth = sub.add_parser(
+        "synth", help="the Fig. 2 protocol per camera model (orthographic, affine, perspective)"
+    )
+    synth.add_argument("--camera", choices=("orthographic", "affine", "perspective"), default="orthographic")
+    synth.add_argument(
+        "--alpha", type=float, nargs="+", default=[5.0, 10.0, 15.0, 20.0, 30.0], help="degrees"
+    )
+    synth.add_argument("--views", type=int, nargs="+", choices=(2, 3), default=[2, 3], help="seed views N")
+    synth.add_argument("--size", type=int, default=64, help="image side in pixels")
+    synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
+    synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
+    synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
     # Listed for --help; main() hands its arguments to torch_eigview.bench unparsed.
     sub.add_parser("bench", help="benchmarks (warp, eigen step, GEMM, scaling): eigview bench --help")
     return parser
@@ -210,6 +222,28 @@ def _run_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_synth(args: argparse.Namespace) -> int:
+    from torch_eigview.demo import run_synth
+    from torch_eigview.synthetic import SHAPES
+
+    shapes = SHAPES if args.shapes is None else tuple(args.shapes.split(","))
+    unknown = sorted(set(shapes) - set(SHAPES))
+    if unknown:
+        raise ValueError(f"--shapes has unknown shape(s) {unknown}; known: {', '.join(SHAPES)}")
+    record = run_synth(
+        args.camera,
+        args.alpha,
+        args.views,
+        size=args.size,
+        correspondences=args.correspondences,
+        shapes=shapes,
+    )
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(record, fh, indent=2, default=str)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``eigview``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -226,6 +260,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run_export(args)
         if args.command == "demo":
             return _run_demo(args)
+        if args.command == "synth":
+            return _run_synth(args)
         if args.command == "predict":
             from torch_eigview.predict import run
 

@@ -19,15 +19,36 @@ from dataclasses import dataclass, field
 
 import torch
 
+from torch_eigview.correspondence import Correspondence, estimate_correspondence
 from torch_eigview.eigenspace import Eigenspace
 from torch_eigview.experiment import angle_range
+from torch_eigview.perspective import PerspectiveWarp
 from torch_eigview.projection import EigenProjection
 from torch_eigview.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import PairGeometry, SynthesisOptions, synthesize_views
-from torch_eigview.synthetic import SHAPES, AffineCamera, OrthographicCamera, exact_correspondence, render
+from torch_eigview.synthetic import (
+    CAMERAS,
+    SHAPES,
+    AffineCamera,
+    OrthographicCamera,
+    PerspectiveCamera,
+    exact_correspondence,
+    exact_correspondence_2d,
+    render,
+    view_correspondence,
+)
 from torch_eigview.synthetic_shapes import SyntheticObject, make_object
+from torch_eigview.warp import NovelViewWarp
 
-__all__ = ["SyntheticScene", "recognition_experiment", "run_demo", "synthetic_gallery"]
+__all__ = [
+    "SyntheticScene",
+    "camera_warp",
+    "default_camera",
+    "recognition_experiment",
+    "run_demo",
+    "synthesis_error",
+    "synthetic_gallery",
+]
 
 CORRESPONDENCES = ("flow", "exact")
 # Synthetic orthographic renders: no camera tilt and no size normalization (COIL's defaults).
@@ -40,12 +61,12 @@ class SyntheticScene:
 
     Attributes:
         shapes: object names (see :data:`~torch_eigview.synthetic.SHAPES`).
-        camera: the orthographic camera.
+        camera: the camera (orthographic by default; any :func:`default_camera`).
         seed: texture seed of every object.
     """
 
     shapes: Sequence[str] = SHAPES
-    camera: AffineCamera = field(default_factory=lambda: OrthographicCamera(64))
+    camera: AffineCamera | PerspectiveCamera = field(default_factory=lambda: OrthographicCamera(64))
     seed: int = 0
     _objects: dict[str, SyntheticObject] = field(default_factory=dict, repr=False)
     _cache: dict[tuple[str, float], torch.Tensor] = field(default_factory=dict, repr=False)
@@ -64,6 +85,110 @@ class SyntheticScene:
                 self._cache[key] = render(self.object(name), float(t), self.camera).image
             out.append(self._cache[key])
         return torch.stack(out)
+
+
+def default_camera(name: str, size: int = 64) -> AffineCamera | PerspectiveCamera:
+    """The camera of each model in ``eigview synth``.
+
+    ``"orthographic"``: the paper's (:func:`~torch_eigview.synthetic.OrthographicCamera`).
+    ``"affine"``: anisotropic scale (0.9 and 1.05 of the orthographic one), a start angle
+    (x also sees 0.15·Z) and the rotation axis 2 pixels left of the centre column.
+    ``"perspective"``: a pinhole at 4 object radii from the axis (the object spans about
+    ±15° of the field of view).
+    """
+    if name == "orthographic":
+        return OrthographicCamera(size)
+    if name == "affine":
+        s = 0.45 * size
+        return AffineCamera(
+            ((0.9 * s, 0.0, 0.15 * s), (0.0, -1.05 * s, 0.0)),
+            size,
+            offset=((size - 1) / 2 - 2, (size - 1) / 2 + 1),
+        )
+    if name == "perspective":
+        return PerspectiveCamera(size, distance=4.0)
+    raise ValueError(f"unknown camera name={name!r}; known cameras: {', '.join(CAMERAS)}")
+
+
+def _is_plain_orthographic(camera: AffineCamera | PerspectiveCamera) -> bool:
+    if not isinstance(camera, AffineCamera):
+        return False
+    ortho = OrthographicCamera((camera.height, camera.width), float(camera._m[0, 0]))
+    return bool(torch.equal(camera.P, ortho.P))
+
+
+def camera_warp(camera: AffineCamera | PerspectiveCamera, alpha: float) -> NovelViewWarp:
+    """The warp of a camera model: Eq. 7 (orthographic), Sec. 4's affine solve or trifocal transfer."""
+    if isinstance(camera, PerspectiveCamera):
+        return PerspectiveWarp(alpha, camera._k, camera.distance)
+    if _is_plain_orthographic(camera):
+        return NovelViewWarp(alpha)
+    return NovelViewWarp(alpha, camera=camera.P)
+
+
+def _pair_correspondence(
+    scene: SyntheticScene, name: str, alpha: float, theta_1: float, correspondences: str
+) -> Correspondence:
+    if correspondences == "exact":
+        obj = scene.object(name)
+        if isinstance(scene.camera, PerspectiveCamera):
+            return exact_correspondence_2d(obj, alpha, scene.camera, theta_1=theta_1)
+        return exact_correspondence(obj, alpha, scene.camera, theta_1=theta_1)
+    seeds = scene.views(name, [theta_1, theta_1 + alpha])
+    opts = SYNTHETIC_OPTIONS
+    return estimate_correspondence(
+        seeds[0], seeds[1], method=opts.flow, threshold=opts.threshold, **opts.flow_kwargs()
+    )
+
+
+def _camera_gallery(
+    scene: SyntheticScene,
+    name: str,
+    alpha: float,
+    first: float,
+    n_views: int,
+    thetas: list[float],
+    correspondences: str,
+) -> torch.Tensor:
+    """Views at ``thetas`` for an affine or perspective camera: each angle from the seed
+    pair of its sector (below the second seed: the first pair; the rest: the last)."""
+    warp = camera_warp(scene.camera, alpha)
+    rel = torch.tensor(thetas, dtype=torch.float64) - first
+    pair = torch.clamp(torch.floor(rel / alpha), 0, n_views - 2).long()
+    out: list[torch.Tensor | None] = [None] * len(thetas)
+    for n in range(n_views - 1):
+        sel = (pair == n).nonzero().flatten().tolist()
+        if not sel:
+            continue
+        seeds = scene.views(name, [first + n * alpha, first + (n + 1) * alpha])
+        corr = _pair_correspondence(scene, name, alpha, first + n * alpha, correspondences)
+        views = warp(seeds[0], seeds[1], correspondence=corr, thetas=[float(rel[i]) - n * alpha for i in sel])
+        for j, i in enumerate(sel):
+            out[i] = views[j]
+    return torch.stack([v for v in out if v is not None])
+
+
+def synthesis_error(
+    scene: SyntheticScene, name: str, alpha: float, thetas: Sequence[float], correspondences: str = "exact"
+) -> list[float]:
+    """Per-pixel mean absolute error of views synthesized from seeds 0° and α against renders.
+
+    Over the pixels of the rendered view at θ that both seed views see (the paper's
+    "except occluded pixels"); intensities are in [0, 1], so 0.01 is 1%.
+
+    Returns:
+        One error per angle in ``thetas``.
+    """
+    obj = scene.object(name)
+    views = _camera_gallery(scene, name, alpha, 0.0, 2, list(thetas), correspondences)
+    errors = []
+    for view, theta in zip(views, thetas, strict=True):
+        truth = render(obj, float(theta), scene.camera)
+        seen1 = view_correspondence(obj, theta, 0.0, scene.camera, view_a=truth).visible
+        seen2 = view_correspondence(obj, theta, alpha, scene.camera, view_a=truth).visible
+        both = truth.mask & seen1 & seen2
+        errors.append(float((view[0] - truth.image[0]).abs()[both].mean()))
+    return errors
 
 
 def synthetic_gallery(
@@ -101,12 +226,15 @@ def synthetic_gallery(
         reach = 20.0 if n_views == 2 else max(20.0, alpha)
         synth = (-reach, reach, 1.0)
     thetas = angle_range(*synth, name="synth")
+    if not _is_plain_orthographic(scene.camera):
+        return _camera_gallery(scene, name, alpha, first, n_views, thetas, correspondences), thetas
     seeds = scene.views(name, [first + n * alpha for n in range(n_views)])
     geometry = None
     if correspondences == "exact":
-        obj = scene.object(name)
+        obj, camera = scene.object(name), scene.camera
+        assert isinstance(camera, AffineCamera)  # plain orthographic, checked above
         geometry = [
-            PairGeometry(exact_correspondence(obj, alpha, scene.camera, theta_1=first + n * alpha), 0.0, 0.0)
+            PairGeometry(exact_correspondence(obj, alpha, camera, theta_1=first + n * alpha), 0.0, 0.0)
             for n in range(n_views - 1)
         ]
     out = synthesize_views(seeds, alpha, [t - first for t in thetas], SYNTHETIC_OPTIONS, geometry)
@@ -267,6 +395,68 @@ def run_demo(
 
 
 _PAPER_N2 = {5.0: 100.0, 10.0: 100.0, 15.0: 99.33, 20.0: 96.44, 30.0: 93.77}
+#: Fig. 2(ii) of the paper, (alpha, N) -> accuracy (%).
+PAPER_FIG2 = {**{(a, 2): v for a, v in _PAPER_N2.items()}, (20.0, 3): 100.0, (30.0, 3): 100.0}
+
+
+def run_synth(
+    camera: str = "orthographic",
+    alphas: Sequence[float] = (5.0, 10.0, 15.0, 20.0, 30.0),
+    views: Sequence[int] = (2, 3),
+    *,
+    size: int = 64,
+    correspondences: str = "flow",
+    error_thetas: Sequence[float] = (-15.0, -5.0, 4.0, 15.0),
+    error_alpha: float = 10.0,
+    shapes: Sequence[str] = SHAPES,
+    test: tuple[float, float] = (-45.0, 44.0),
+    verbose: bool = True,
+) -> dict[str, object]:
+    """The Fig. 2 protocol for one camera model (``eigview synth --camera``).
+
+    For each α and number of seed views N: the eigenspace of the views synthesized with
+    this camera's model (Eq. 7, the affine solve or trifocal transfer) and 1-NN on the
+    rendered test views, as :func:`recognition_experiment`; then the per-pixel error of
+    views synthesized from seeds 0° and ``error_alpha`` with exact correspondences
+    against the renders (:func:`synthesis_error`), per object.
+
+    Returns:
+        ``{"camera", "results": [records without recognizers], "synthesis_error":
+        {object: [errors per angle]}, "error_thetas", "seconds"}``.
+    """
+    t0 = time.perf_counter()
+    scene = SyntheticScene(shapes=tuple(shapes), camera=default_camera(camera, size))
+    results = []
+    for n in views:
+        for alpha in alphas:
+            record = recognition_experiment(alpha, n, scene=scene, correspondences=correspondences, test=test)
+            record.pop("recognizer")
+            results.append(record)
+    errors = {name: synthesis_error(scene, name, error_alpha, error_thetas) for name in scene.shapes}
+    out = {
+        "camera": camera,
+        "size": size,
+        "results": results,
+        "synthesis_error": errors,
+        "error_thetas": list(error_thetas),
+        "error_alpha": error_alpha,
+        "seconds": time.perf_counter() - t0,
+    }
+    if verbose:
+        print(f"camera model: {camera} ({size}x{size}), {correspondences} correspondences")
+        print(format_table(results, PAPER_FIG2))
+        print(
+            f"per-pixel mean abs error of synthesized vs rendered views (exact correspondences, "
+            f"seeds 0 and {error_alpha:g} deg, pixels both seeds see; 0.01 = 1%):"
+        )
+        print(f"{'object':>13} " + " ".join(f"{t:>7g}" for t in error_thetas) + "    mean")
+        for name, errs in errors.items():
+            print(f"{name:>13} " + " ".join(f"{e:7.4f}" for e in errs) + f" {sum(errs) / len(errs):7.4f}")
+        every = [e for errs in errors.values() for e in errs]
+        print(
+            f"{'all':>13} mean {sum(every) / len(every):.4f}, max {max(every):.4f}; {out['seconds']:.1f} s in all"
+        )
+    return out
 
 
 def _figure(
