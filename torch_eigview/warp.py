@@ -302,7 +302,9 @@ class NovelViewWarp(torch.nn.Module):
         if camera is not None:
             affine_coefficients(camera, self.alpha, [0.0])  # validates the camera now
             if self.elevation != 0.0:
-                raise ValueError(f"elevation={elevation} must be 0 with an affine camera (its rows stay rows)")
+                raise ValueError(
+                    f"elevation={elevation} must be 0 with an affine camera (its rows stay rows)"
+                )
             self.camera = camera.detach().to(torch.float64).clone()
 
     def extra_repr(self) -> str:
