@@ -118,3 +118,16 @@ def test_bad_input(camera: PerspectiveCamera) -> None:
     flat = correspondence_from_disparity(torch.zeros(SIZE, SIZE))
     with pytest.raises(ValueError, match=r"correspondence must be 2D for a perspective camera"):
         PerspectiveWarp(ALPHA, k, 4.0).maps(flat, [5.0])
+
+
+def test_device_and_dtype_kept(scene: tuple, camera: PerspectiveCamera, device: torch.device) -> None:
+    """The maps are computed on the correspondences' device; views keep dtype and device."""
+    _, seeds, corr = scene
+    warp = PerspectiveWarp(ALPHA, camera._k, camera.distance)
+    expected = warp(seeds[0], seeds[1], correspondence=corr, thetas=[5.0])
+    for dtype in (torch.float32, torch.float64):
+        out = warp(
+            seeds[0].to(device, dtype), seeds[1].to(device, dtype), correspondence=corr.to(device), thetas=[5.0]
+        )
+        assert out.device.type == device.type and out.dtype == dtype
+        torch.testing.assert_close(out.cpu().float(), expected, rtol=0, atol=1e-4)

@@ -165,16 +165,19 @@ class PerspectiveWarp(NovelViewWarp):
         ``(src_x, src_y, hit, covered)``, ``covered`` = hit or reached by :func:`_grow`."""
         b, h, w = shift_x.shape
         dtype, device = shift_x.dtype, shift_x.device
+        f64 = torch.float64  # the geometry in float64, on the correspondences' device
         k = self.K.to(torch.float64)
         yy, xx = torch.meshgrid(
-            torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij"
+            torch.arange(h, dtype=f64, device=device),
+            torch.arange(w, dtype=f64, device=device),
+            indexing="ij",
         )
         pa = torch.stack([xx.expand(b, h, w), yy.expand(b, h, w)], dim=-1).reshape(b, h * w, 2)
-        pb = pa + torch.stack([shift_x, shift_y], dim=-1).to("cpu", torch.float64).reshape(b, h * w, 2)
+        pb = pa + torch.stack([shift_x, shift_y], dim=-1).to(f64).reshape(b, h * w, 2)
         ra, ta = turntable_pose(angles[0], self.distance)
         rb, tb = turntable_pose(angles[1], self.distance)
-        proj_a = k @ torch.cat([ra, ta[:, None]], dim=1)
-        proj_b = k @ torch.cat([rb, tb[:, None]], dim=1)
+        proj_a = (k @ torch.cat([ra, ta[:, None]], dim=1)).to(device)
+        proj_b = (k @ torch.cat([rb, tb[:, None]], dim=1)).to(device)
         points = triangulate_points(proj_a.expand(b, 3, 4), proj_b.expand(b, 3, 4), pa, pb, solver="svd")
         dst, depth, own = [], [], []
         for th in theta.tolist():
@@ -185,22 +188,23 @@ class PerspectiveWarp(NovelViewWarp):
             else:
                 r_rel = rn @ rb.T
                 tensor = novel_view_tensor_from_cameras(k, ra, ta, rb, tb, r_rel, tn - r_rel @ tb)
-                dst.append(transfer_points(tensor, pa, pb, line=self.line))
+                dst.append(transfer_points(tensor.to(device), pa, pb, line=self.line))
                 own.append(False)
+            rn, tn = rn.to(device), tn.to(device)
             depth.append(-(points @ rn[2] + tn[2]))  # larger = nearer the novel camera
         t = len(dst)
         dst_xy = torch.stack(dst, dim=1).reshape(b, t, h, w, 2)
         key = torch.stack(depth, dim=1).reshape(b, t, h, w)
         ok = torch.isfinite(dst_xy).all(-1) & torch.isfinite(key)
-        own_view = torch.tensor(own).view(1, t, 1, 1)
-        use = (valid.to("cpu")[:, None] | own_view) & ok
+        own_view = torch.tensor(own, device=device).view(1, t, 1, 1)
+        use = (valid.to(device)[:, None] | own_view) & ok
         dst_xy = torch.where(ok[..., None], dst_xy, 0.0)
         key = torch.where(ok, key, 0.0)
         src_x, src_y, hit = invert_map_2d(
             dst_xy[..., 0].to(dtype), dst_xy[..., 1].to(dtype), use, key.to(dtype), self.max_stretch
         )
         src_x, src_y, grown = _grow(src_x, src_y, hit, self.grow)
-        return src_x.to(device), src_y.to(device), hit.to(device), grown.to(device)
+        return src_x, src_y, hit, grown
 
     def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
         """Target→source maps (``src_y`` set) and blend weights for the novel angles ``thetas``.
