@@ -30,6 +30,17 @@ CONFIGS: dict[str, CoilExperiment] = {
         objects=OBJECTS,
         synthesis=SynthesisOptions(elevation=0.0),
     ),
+    # Three seeds at 0, 10, 20: the synthesized range follows them, -5..20 every 5 degrees.
+    "nvs3": CoilExperiment(
+        alpha=ALPHA,
+        views=3,
+        synth=(-5.0, 10.0, 5.0),
+        test=TEST,
+        components=3,
+        method="nvs",
+        objects=OBJECTS,
+        synthesis=SynthesisOptions(elevation=0.0),
+    ),
     "sparse": CoilExperiment(alpha=ALPHA, test=TEST, components=3, method="sparse", objects=OBJECTS),
     "sparse3": CoilExperiment(
         alpha=ALPHA, views=3, test=TEST, components=3, method="sparse", objects=OBJECTS
@@ -43,11 +54,15 @@ CONFIGS: dict[str, CoilExperiment] = {
 
 def expected_train_views(exp: CoilExperiment) -> int:
     n_obj = len(OBJECTS)
+    # The range spelled out here, not read back from the experiment: synth, its stop moved
+    # by alpha for the third seed.
+    start, stop, step = exp.synth
+    stop += (exp.views - 2) * exp.alpha
     if exp.method == "nvs":
-        return n_obj * len(angle_range(*exp.synth, name="synth"))
+        return n_obj * len(angle_range(start, stop, step, name="synth"))
     if exp.method == "sparse":
         return n_obj * exp.views
-    return n_obj * len(angle_range(exp.synth[0], exp.synth[1], 5.0, name="synth"))
+    return n_obj * len(angle_range(start, stop, 5.0, name="synth"))
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +125,8 @@ def test_result_record(results: dict[str, CoilResult], name: str) -> None:
     assert all(v >= 0.0 for v in result.seconds.values())
     if exp.method == "nvs":
         assert set(result.elevations) == set(OBJECTS)
-        assert all(e == [0.0] for e in result.elevations.values())  # one pair, elevation fixed
+        # One record per seed pair, the elevation fixed.
+        assert all(e == [0.0] * (exp.views - 1) for e in result.elevations.values())
     else:
         assert result.seconds["correspondence"] == result.seconds["synthesis"] == 0.0
         assert result.elevations == {}
@@ -118,7 +134,45 @@ def test_result_record(results: dict[str, CoilResult], name: str) -> None:
 
 def test_expected_view_counts() -> None:
     """The counts the record test relies on, spelled out."""
-    assert [expected_train_views(CONFIGS[n]) for n in ("nvs", "sparse", "sparse3", "dense")] == [12, 6, 9, 15]
+    names = ("nvs", "nvs3", "sparse", "sparse3", "dense")
+    assert [expected_train_views(CONFIGS[n]) for n in names] == [12, 18, 6, 9, 15]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "want"),
+    [
+        (dict(alpha=15.0), (-20.0, 20.0)),  # two seeds: synth as given
+        (dict(alpha=15.0, views=3), (-20.0, 35.0)),  # seeds 0, 15, 30: 20 before, 5 past
+        (dict(alpha=5.0, views=3), (-20.0, 25.0)),
+        (dict(alpha=-10.0, views=3), (-30.0, 20.0)),  # seeds 0, -10, -20: the start moves
+        (dict(alpha=15.0, views=3, synth_follows_seeds=False), (-20.0, 20.0)),
+        (dict(alpha=10.0, views=3, synth=(-5.0, 10.0, 5.0)), (-5.0, 20.0)),
+    ],
+    ids=["two-seeds", "three-seeds-15", "three-seeds-5", "negative-alpha", "fixed", "short"],
+)
+def test_synth_range_follows_the_seeds(kwargs: dict[str, object], want: tuple[float, float]) -> None:
+    exp = CoilExperiment(**kwargs)  # type: ignore[arg-type]
+    assert exp.synth_range() == want
+    angles = exp.synth_angles()
+    assert (angles[0], angles[-1]) == want
+    assert angles == angle_range(*want, exp.synth[2], "synth")
+    assert exp.synth_angles(5.0) == angle_range(*want, 5.0, "synth")
+    # The margins beyond the first and the last seed are those synth gives two seeds.
+    seeds = [n * exp.alpha for n in range(exp.views)]
+    if exp.synth_follows_seeds and exp.alpha > 0:
+        assert (min(seeds) - want[0], want[1] - max(seeds)) == (-exp.synth[0], exp.synth[1] - exp.alpha)
+
+
+@pytest.mark.coil
+def test_three_seeds_gallery_covers_the_seeds(results: dict[str, CoilResult], folder: CoilFolder) -> None:
+    """The third seed (20 degrees) lies inside the gallery, and its real view is recognized
+    at its pose: it is reproduced there, not just neighboured."""
+    rec = results["nvs3"].recognizer
+    assert sorted(set(rec.poses.tolist())) == [-5.0, 0.0, 5.0, 10.0, 15.0, 20.0]
+    for obj in OBJECTS:
+        pred = rec.predict(folder.images(obj, [2 * ALPHA]))
+        assert pred.labels.tolist() == [obj]
+        assert pred.poses.tolist() == [2 * ALPHA]
 
 
 @pytest.mark.coil
@@ -180,6 +234,11 @@ def test_config_errors(kwargs: dict[str, object], match: str) -> None:
 def test_objects_errors(folder: CoilFolder, objects: list[int], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         CoilExperiment(method="sparse", objects=objects).run(folder)
+
+
+def test_synth_follows_seeds_must_be_bool() -> None:
+    with pytest.raises(TypeError, match="synth_follows_seeds must be a bool, got 'no'"):
+        CoilExperiment(synth_follows_seeds="no")  # type: ignore[arg-type]
 
 
 def test_components_validated_at_construction() -> None:

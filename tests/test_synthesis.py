@@ -8,7 +8,14 @@ import torch.nn.functional as F
 
 from torch_eigview.correspondence import estimate_correspondence
 from torch_eigview.data import CoilFolder
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
+from torch_eigview.synthesis import (
+    PairGeometry,
+    SynthesisOptions,
+    SynthesizedViews,
+    pair_of,
+    synthesize_views,
+)
+from torch_eigview.synthetic import OrthographicCamera, exact_correspondence, make_object, render_views
 from torch_eigview.warp import NovelViewWarp
 
 ALPHA = 10.0
@@ -100,6 +107,79 @@ def test_three_seeds_route_angles_to_their_pair(folder: CoilFolder) -> None:
     torch.testing.assert_close(both.views[:2], first.views, atol=1e-6, rtol=0)
     torch.testing.assert_close(both.views[2:], second.views, atol=1e-6, rtol=0)
     torch.testing.assert_close(both.thetas, torch.tensor(thetas, dtype=torch.float64))
+    assert both.pairs.tolist() == [0, 0, 1, 1, 1]
+    assert first.pairs.tolist() == [0, 0] and second.pairs.tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize(
+    ("thetas", "alpha", "n_seeds", "want"),
+    [
+        # Two seeds: one pair for every angle.
+        ([-30.0, 0.0, 5.0, 10.0, 40.0], 10.0, 2, [0, 0, 0, 0, 0]),
+        # Three seeds: the sector [n alpha, (n + 1) alpha) is pair n's; before the first
+        # seed pair 0 extrapolates, at and past the last seed pair 1 does.
+        (
+            [-30.0, -0.5, 0.0, 5.0, 9.75, 10.0, 15.0, 19.75, 20.0, 35.0],
+            10.0,
+            3,
+            [0, 0, 0, 0, 0, 1, 1, 1, 1, 1],
+        ),
+        # Four seeds: the interior seeds 10 and 20 belong to the pair they start.
+        ([9.75, 10.0, 19.75, 20.0, 30.0, 45.0], 10.0, 4, [0, 1, 1, 2, 2, 2]),
+        # A negative alpha: the seeds at 0, -10, -20, the sectors mirrored.
+        ([5.0, 0.0, -5.0, -10.0, -15.0, -25.0], -10.0, 3, [0, 0, 0, 1, 1, 1]),
+    ],
+    ids=["two-seeds", "three-seeds", "four-seeds", "negative-alpha"],
+)
+def test_pair_of(thetas: list[float], alpha: float, n_seeds: int, want: list[int]) -> None:
+    got = pair_of(thetas, alpha, n_seeds)
+    assert got.dtype == torch.int64
+    assert got.tolist() == want
+
+
+def test_pair_of_errors() -> None:
+    with pytest.raises(ValueError, match="n_seeds must be an int >= 2, got 1"):
+        pair_of([0.0], ALPHA, 1)
+    with pytest.raises(ValueError, match=r"alpha=0\.0 must not be a multiple of 180"):
+        pair_of([0.0], 0.0, 3)
+
+
+@pytest.fixture(scope="module")
+def rendered() -> tuple[torch.Tensor, list[PairGeometry]]:
+    """Three rendered seed views at 0, ALPHA, 2 ALPHA (48 px, orthographic) and the exact
+    correspondences of both pairs, elevation 0: a seed's own view must come out exactly."""
+    obj, camera = make_object("head", seed=3), OrthographicCamera(48)
+    seeds = render_views(obj, [0.0, ALPHA, 2 * ALPHA], camera)
+    geometry = [
+        PairGeometry(exact_correspondence(obj, ALPHA, camera, theta_1=n * ALPHA), 0.0, 0.0) for n in range(2)
+    ]
+    return seeds, geometry
+
+
+def test_seeds_reproduced_at_their_own_angles(rendered: tuple[torch.Tensor, list[PairGeometry]]) -> None:
+    seeds, geometry = rendered
+    out = synthesize_views(seeds, ALPHA, [0.0, ALPHA, 2 * ALPHA], PLAIN, geometry)
+    assert out.pairs.tolist() == [0, 1, 1]
+    torch.testing.assert_close(out.views, seeds, atol=1e-5, rtol=0)
+    # The middle seed is also pair 0's second view: the same image from either side.
+    left = synthesize_views(seeds[:2], ALPHA, [ALPHA], PLAIN, geometry[:1])
+    torch.testing.assert_close(left.views[0], seeds[1], atol=1e-5, rtol=0)
+
+
+def test_views_continuous_across_the_middle_seed(rendered: tuple[torch.Tensor, list[PairGeometry]]) -> None:
+    """Just before the middle seed pair 0 extrapolates towards it, just after pair 1 starts
+    from it: both ends meet the seed, so the step across the seam is small (it would not
+    be if a pair were warped with the other's reference angle or the wrong seeds)."""
+    seeds, geometry = rendered
+    eps = 0.02
+    thetas = [ALPHA - 1.0, ALPHA - eps, ALPHA, ALPHA + eps, ALPHA + 1.0]
+    out = synthesize_views(seeds, ALPHA, thetas, PLAIN, geometry)
+    assert out.pairs.tolist() == [0, 0, 1, 1, 1]
+    near = [float((out.views[i] - seeds[1]).abs().mean()) for i in range(5)]
+    seam = float((out.views[3] - out.views[1]).abs().mean())
+    one_degree = float((out.views[4] - out.views[0]).abs().mean())
+    assert near[2] < 1e-6
+    assert max(near[1], near[3], seam) < 0.1 * one_degree
 
 
 def test_options_defaults() -> None:

@@ -1,10 +1,21 @@
 """The paper's COIL experiment (Sec. 5.2, Fig. 4(b)) on a folder of COIL-style images.
 
 Per object: seed views at ``center``, ``center + α`` (and ``center + 2α`` for three
-views); the views over ``synth`` are synthesized (``nvs``), or the baseline eigenspace
-uses the seed views alone (``sparse``) or the real views every 5° over ``synth``
-(``dense``). One eigenspace is fitted over all objects' gallery views, and every real
-view every 5° over ``test`` (around ``center``) is recognized by its nearest neighbour.
+views); the views over the gallery range are synthesized (``nvs``), or the baseline
+eigenspace uses the seed views alone (``sparse``) or the real views every 5° over the
+gallery range (``dense``). One eigenspace is fitted over all objects' gallery views, and
+every real view every 5° over ``test`` (around ``center``) is recognized by its nearest
+neighbour.
+
+The gallery range is ``synth`` for two seed views. With more, it follows the seeds'
+span (:meth:`CoilExperiment.synth_angles`): each further seed extends it by α on its
+side, so that it keeps the margins ``synth`` gives two views, ``-start`` before the first
+seed and ``stop - α`` past the last (α > 0). Without that the default −20°..20° would
+stop short of a third seed at 2α = 30° (α = 15°): that seed's pair would only
+interpolate 15°..20°, where the first pair's extrapolation is as good, and the extra
+view would bring no coverage. The step stays, so the gallery grows with the span (41
+views per object for two seeds at 1° steps, 41 + α for three), as the paper's SOIL
+experiment grows it with 2α.
 """
 
 from __future__ import annotations
@@ -78,7 +89,9 @@ class CoilExperiment:
         alpha: angle between seed views in degrees.
         center: pose (degrees) of the first seed view and of the test range's centre.
         views: number of seed views (2 or 3).
-        synth: (start, stop, step) of the synthesized angles, degrees relative to ``center``.
+        synth: (start, stop, step) of the synthesized angles (``nvs``; ``dense`` takes
+            the real views every 5° over the same range), degrees relative to ``center``,
+            for two seed views; see ``synth_follows_seeds`` for more.
         test: (start, stop) of the test range relative to ``center``, every 5 degrees.
         components: eigenspace dimension k (int) or energy fraction (float in (0, 1)).
         method: ``"nvs"``, ``"sparse"`` or ``"dense"``.
@@ -88,6 +101,10 @@ class CoilExperiment:
         kernel: None for the linear eigenspace (the paper's), or "rbf", "poly", "cosine",
             "linear" for a :class:`KernelEigenspace` over the same gallery.
         gamma: the kernel's γ (None: 1/N; "median": 1/median squared distance, rbf only).
+        synth_follows_seeds: with more than two seed views, extend ``synth`` by
+            (views − 2)·α on the side the seeds extend to (the stop for α > 0, the start
+            for α < 0), so that the range keeps its margins beyond the first and the last
+            seed; False takes ``synth`` as it is whatever the number of views.
     """
 
     alpha: float = 5.0
@@ -102,6 +119,7 @@ class CoilExperiment:
     synthesis: SynthesisOptions = field(default_factory=SynthesisOptions)
     kernel: str | None = None
     gamma: float | str | None = None
+    synth_follows_seeds: bool = True
 
     def __post_init__(self) -> None:
         if self.kernel is not None:
@@ -121,7 +139,27 @@ class CoilExperiment:
         if self.views not in (2, 3):
             raise ValueError(f"views must be 2 or 3, got {self.views}")
         angle_range(*self.synth, name="synth")
+        if not isinstance(self.synth_follows_seeds, bool):
+            raise TypeError(f"synth_follows_seeds must be a bool, got {self.synth_follows_seeds!r}")
         angle_range(self.test[0], self.test[1], 5.0, name="test")
+
+    def synth_range(self) -> tuple[float, float]:
+        """(start, stop) of the gallery range in degrees relative to ``center``.
+
+        ``synth``'s for two seed views; for m views (``synth_follows_seeds``) extended by
+        (m − 2)·α on the seeds' side: ``(start, stop + (m − 2)·α)`` for α > 0.
+        """
+        start, stop, _ = self.synth
+        if not self.synth_follows_seeds:
+            return start, stop
+        extra = (self.views - 2) * self.alpha
+        return start + min(extra, 0.0), stop + max(extra, 0.0)
+
+    def synth_angles(self, step: float | None = None) -> list[float]:
+        """The gallery angles relative to ``center``: :meth:`synth_range` every ``step``
+        degrees (default ``synth``'s step)."""
+        start, stop = self.synth_range()
+        return angle_range(start, stop, self.synth[2] if step is None else step, "synth")
 
     def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
         return folder.images(obj, [self.center + n * self.alpha for n in range(self.views)])
@@ -137,11 +175,10 @@ class CoilExperiment:
             angles = [c + n * self.alpha for n in range(self.views)]
             return folder.images(obj, angles), angles
         if self.method == "dense":
-            start, stop, _ = self.synth
-            angles = [c + a for a in angle_range(start, stop, 5.0, "synth")]
+            angles = [c + a for a in self.synth_angles(5.0)]
             return folder.images(obj, angles), angles
         seeds = self._seeds(folder, obj)
-        thetas = angle_range(*self.synth, name="synth")
+        thetas = self.synth_angles()
         out = synthesize_views(seeds, self.alpha, thetas, self.synthesis)
         for key, value in out.seconds.items():
             seconds[key] += value

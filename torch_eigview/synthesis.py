@@ -1,9 +1,24 @@
 """From a few seed views of one object to its dense set of views (Secs. 3 and 4.1).
 
-The seed views are at 0, α, 2α, … (degrees). Each consecutive pair synthesizes the novel
-angles of its own sector: angles below α come from the first pair, angles at or above
-(m − 1)·α… from the last pair, with the pair's own angles as reference, so A is the
-concatenation [G1C1 … G(m−1)C(m−1)] of Sec. 4.1 in its direct form.
+The seed views are at 0, α, 2α, …, (m − 1)·α (degrees; α may be negative). Each
+consecutive pair n (seeds n and n + 1, 0 <= n <= m − 2) synthesizes the angles of its own
+sector, with the pair's own angles as reference, so A is the concatenation
+[G1C1 … G(m−1)C(m−1)] of Sec. 4.1 in its direct form. Every synthesized view comes from
+exactly one pair (:func:`pair_of`):
+
+- an angle between two seeds, n·α <= θ < (n + 1)·α, from pair n, which interpolates;
+- an angle before the first seed, from pair 0, and one at or past the last seed, from
+  pair m − 2: the pair nearest in angle extrapolates on each side;
+- an interior seed's own angle n·α, from pair n (its first view). Pair n − 1 gives the
+  same image there (its second view: the map at a seed's own angle is the identity and
+  needs no correspondence; with a tilted camera up to float rounding in the image's
+  first and last rows), so the views are continuous across every seam. The pairs are
+  not blended: that would mix an extrapolation with an interpolation warped
+  differently, and on COIL-20 a cross-fade over α/2 each side of the middle seed
+  changed no recognition.
+
+Each pair keeps its own elevation estimate (``elevation="auto"``), measured from its own
+flow.
 """
 
 from __future__ import annotations
@@ -20,7 +35,14 @@ from torch_eigview.errors import as_angle_tensor, check_alpha, check_finite, che
 from torch_eigview.normalize import foreground_mask, normalize_extent
 from torch_eigview.warp import NovelViewWarp
 
-__all__ = ["PairGeometry", "SynthesisOptions", "SynthesizedViews", "pair_geometry", "synthesize_views"]
+__all__ = [
+    "PairGeometry",
+    "SynthesisOptions",
+    "SynthesizedViews",
+    "pair_geometry",
+    "pair_of",
+    "synthesize_views",
+]
 
 _FAST_TVL1 = {"num_warp": 3, "num_iter": 5}
 
@@ -78,17 +100,37 @@ class SynthesizedViews:
         thetas: (T,) their angles in degrees from the first seed view.
         elevations: one elevation (degrees) per seed pair.
         seconds: time spent in ``"correspondence"`` and ``"synthesis"``.
+        pairs: (T,) int64, the seed pair each view comes from (:func:`pair_of`): n for
+            seeds n and n + 1.
     """
 
     views: torch.Tensor
     thetas: torch.Tensor
     elevations: list[float]
     seconds: dict[str, float] = field(default_factory=dict)
+    pairs: torch.Tensor = field(default_factory=lambda: torch.empty(0, dtype=torch.long))
 
 
-def _pair_of(thetas: torch.Tensor, alpha: float, n_pairs: int) -> torch.Tensor:
-    """Index of the seed pair whose sector holds each angle."""
-    return torch.clamp(torch.floor(thetas / alpha), 0, n_pairs - 1).long()
+def pair_of(thetas: object, alpha: float, n_seeds: int) -> torch.Tensor:
+    """The seed pair that synthesizes each angle (see the module's docstring).
+
+    Args:
+        thetas: (T,) angles in degrees from the first seed view.
+        alpha: angle between consecutive seed views in degrees.
+        n_seeds: number of seed views m (>= 2), at 0, α, …, (m − 1)·α.
+
+    Returns:
+        (T,) int64: n for the pair of seeds n and n + 1, ``clamp(floor(θ / α), 0, m − 2)``.
+
+    Example:
+        >>> pair_of([-5.0, 0.0, 9.0, 10.0, 25.0], 10.0, 3).tolist()
+        [0, 0, 0, 1, 1]
+    """
+    if isinstance(n_seeds, bool) or not isinstance(n_seeds, int) or n_seeds < 2:
+        raise ValueError(f"n_seeds must be an int >= 2, got {n_seeds!r}")
+    alpha = check_alpha(alpha)
+    theta = as_angle_tensor(thetas, "thetas", dtype=torch.float64)
+    return torch.clamp(torch.floor(theta / alpha), 0, n_seeds - 2).long()
 
 
 @dataclass(frozen=True)
@@ -156,6 +198,9 @@ def synthesize_views(
 ) -> SynthesizedViews:
     """Synthesizes the views of one object at ``thetas`` from seed views 0, α, 2α, ….
 
+    Each angle is synthesized by one seed pair, :func:`pair_of`'s: the pair whose sector
+    holds it, or the pair nearest in angle before the first and past the last seed.
+
     Args:
         seeds: (V, C, H, W) seed views, V >= 2, at angles 0, α, …, (V − 1)·α.
         alpha: angle between consecutive seed views in degrees.
@@ -174,7 +219,7 @@ def synthesize_views(
         geometry = pair_geometry(seeds, alpha, opts)
     elif len(geometry) != n_pairs:
         raise ValueError(f"geometry must hold one record per seed pair ({n_pairs}), got {len(geometry)}")
-    pair = _pair_of(theta, alpha, n_pairs)
+    pair = pair_of(theta, alpha, seeds.shape[0])
     out = seeds.new_empty((theta.numel(), *seeds.shape[1:]))
     seconds = {"correspondence": sum(g.seconds for g in geometry), "synthesis": 0.0}
     for n, geo in enumerate(geometry):
@@ -194,4 +239,4 @@ def synthesize_views(
             views = warp.apply_maps(maps, pair_seeds)[0]
         out[sel] = views
         seconds["synthesis"] += time.perf_counter() - t0
-    return SynthesizedViews(out, theta, [g.elevation for g in geometry], seconds)
+    return SynthesizedViews(out, theta, [g.elevation for g in geometry], seconds, pair)
