@@ -1,6 +1,7 @@
 """From a few seed views of one object to its dense set of views (Secs. 3 and 4.1).
 
-The seed views are at 0, α, 2α, …, (m − 1)·α (degrees; α may be negative). Each
+The seed views are at 0, α, 2α, …, (m − 1)·α (degrees; α may be negative), or at
+0, α_1, α_1 + α_2, … with one positive angle α_n per consecutive pair (Sec. 4.1). Each
 consecutive pair n (seeds n and n + 1, 0 <= n <= m − 2) synthesizes the angles of its own
 sector, with the pair's own angles as reference, so A is the concatenation
 [G1C1 … G(m−1)C(m−1)] of Sec. 4.1 in its direct form. Every synthesized view comes from
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import torch
@@ -111,26 +113,41 @@ class SynthesizedViews:
     pairs: torch.Tensor = field(default_factory=lambda: torch.empty(0, dtype=torch.long))
 
 
-def pair_of(thetas: object, alpha: float, n_seeds: int) -> torch.Tensor:
+def pair_of(thetas: object, alpha: float | Sequence[float], n_seeds: int) -> torch.Tensor:
     """The seed pair that synthesizes each angle (see the module's docstring).
 
     Args:
         thetas: (T,) angles in degrees from the first seed view.
-        alpha: angle between consecutive seed views in degrees.
-        n_seeds: number of seed views m (>= 2), at 0, α, …, (m − 1)·α.
+        alpha: angle between consecutive seed views in degrees, or one angle per pair
+            (α_1 … α_(m−1), positive).
+        n_seeds: number of seed views m (>= 2), at 0, α_1, α_1 + α_2, ….
 
     Returns:
-        (T,) int64: n for the pair of seeds n and n + 1, ``clamp(floor(θ / α), 0, m − 2)``.
+        (T,) int64: n for the pair of seeds n and n + 1; with one α,
+        ``clamp(floor(θ / α), 0, m − 2)``.
 
     Example:
         >>> pair_of([-5.0, 0.0, 9.0, 10.0, 25.0], 10.0, 3).tolist()
         [0, 0, 0, 1, 1]
+        >>> pair_of([-5.0, 9.0, 10.0, 25.0], [10.0, 20.0], 3).tolist()
+        [0, 0, 1, 1]
     """
     if isinstance(n_seeds, bool) or not isinstance(n_seeds, int) or n_seeds < 2:
         raise ValueError(f"n_seeds must be an int >= 2, got {n_seeds!r}")
-    alpha = check_alpha(alpha)
+    steps = _steps(alpha, n_seeds)
     theta = as_angle_tensor(thetas, "thetas", dtype=torch.float64)
-    return torch.clamp(torch.floor(theta / alpha), 0, n_seeds - 2).long()
+    if len(set(steps)) == 1:  # one alpha, either sign
+        return torch.clamp(torch.floor(theta / steps[0]), 0, n_seeds - 2).long()
+    starts = torch.tensor(_seed_angles(steps), dtype=torch.float64)
+    return torch.clamp(torch.searchsorted(starts, theta, right=True) - 1, 0, n_seeds - 2).long()
+
+
+def _seed_angles(steps: list[float]) -> list[float]:
+    """Angles of the seed views: 0, α_1, α_1 + α_2, …."""
+    out = [0.0]
+    for a in steps:
+        out.append(out[-1] + a)
+    return out
 
 
 @dataclass(frozen=True)
@@ -142,20 +159,42 @@ class PairGeometry:
     seconds: float
 
 
-def _check_seeds(seeds: torch.Tensor, alpha: float) -> tuple[torch.Tensor, float]:
+def _steps(alpha: object, n_seeds: int) -> list[float]:
+    """Per-pair angles α_n (degrees) of ``n_seeds`` seed views: a number (every pair) or a
+    sequence of ``n_seeds − 1`` positive angles (Sec. 4.1's α_n, seed angles increasing)."""
+    if isinstance(alpha, torch.Tensor):
+        alpha = alpha.detach().reshape(-1).tolist() if alpha.ndim else float(alpha)
+    if isinstance(alpha, Sequence) and not isinstance(alpha, str):
+        if len(alpha) != n_seeds - 1:
+            raise ValueError(
+                f"alpha must hold one angle per consecutive seed pair ({n_seeds} views: {n_seeds - 1} angles), "
+                f"got {len(alpha)}"
+            )
+        steps = [check_alpha(a, f"alpha[{n}]") for n, a in enumerate(alpha)]
+        bad = [n for n, a in enumerate(steps) if a <= 0]
+        if bad:
+            raise ValueError(
+                f"seed view angles must increase: alpha[{bad[0]}]={steps[bad[0]]} must be positive "
+                f"(the angle from seed {bad[0]} to seed {bad[0] + 1}), got alpha={list(alpha)}"
+            )
+    else:
+        steps = [check_alpha(alpha)] * (n_seeds - 1)  # type: ignore[arg-type]
+    if abs(sum(steps)) >= 180:
+        raise ValueError(f"alpha={alpha} with {n_seeds} seed views spans 180 degrees or more")
+    return steps
+
+
+def _check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
     seeds = check_float_tensor(seeds, "seeds")
     check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
     if seeds.shape[0] < 2:
         raise ValueError(f"seeds must hold at least 2 views, got V={seeds.shape[0]}")
     check_finite(seeds, "seeds")
-    alpha = check_alpha(alpha)
-    if abs(alpha) * (seeds.shape[0] - 1) >= 180:
-        raise ValueError(f"alpha={alpha} with {seeds.shape[0]} seed views spans 180 degrees or more")
-    return seeds, alpha
+    return seeds, _steps(alpha, seeds.shape[0])
 
 
 def pair_geometry(
-    seeds: torch.Tensor, alpha: float, options: SynthesisOptions | None = None
+    seeds: torch.Tensor, alpha: float | Sequence[float], options: SynthesisOptions | None = None
 ) -> list[PairGeometry]:
     """Correspondences (and the elevation) of each consecutive seed pair.
 
@@ -164,14 +203,14 @@ def pair_geometry(
 
     Args:
         seeds: (V, C, H, W) seed views at 0, α, …, (V − 1)·α.
-        alpha: angle between consecutive seed views in degrees.
+        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
         options: :class:`SynthesisOptions`.
 
     Returns:
         V − 1 :class:`PairGeometry` records.
     """
     opts = options or SynthesisOptions()
-    seeds, alpha = _check_seeds(seeds, alpha)
+    seeds, steps = _check_seeds(seeds, alpha)
     out = []
     for n in range(seeds.shape[0] - 1):
         t0 = time.perf_counter()
@@ -182,7 +221,7 @@ def pair_geometry(
         elevation = opts.elevation
         if elevation == "auto":
             mask = foreground_mask(v1, opts.background)
-            elevation = float(estimate_elevation(corr, alpha, center=opts.center, mask=mask)[0])
+            elevation = float(estimate_elevation(corr, steps[n], center=opts.center, mask=mask)[0])
             if not math.isfinite(elevation):
                 elevation = 0.0
         out.append(PairGeometry(corr, float(elevation), time.perf_counter() - t0))
@@ -191,7 +230,7 @@ def pair_geometry(
 
 def synthesize_views(
     seeds: torch.Tensor,
-    alpha: float,
+    alpha: float | Sequence[float],
     thetas: object,
     options: SynthesisOptions | None = None,
     geometry: list[PairGeometry] | None = None,
@@ -203,16 +242,24 @@ def synthesize_views(
 
     Args:
         seeds: (V, C, H, W) seed views, V >= 2, at angles 0, α, …, (V − 1)·α.
-        alpha: angle between consecutive seed views in degrees.
+        alpha: angle between consecutive seed views in degrees, or Sec. 4.1's α_n, one
+            per consecutive pair (V − 1 positive angles: the seeds at 0, α_1,
+            α_1 + α_2, …).
         thetas: (T,) novel angles in degrees from the first seed view.
         options: :class:`SynthesisOptions`.
         geometry: the result of :func:`pair_geometry` for these seeds, if already computed.
 
     Returns:
         :class:`SynthesizedViews` with views in the order of ``thetas``.
+
+    Raises:
+        ValueError: fewer than 2 seeds; a number of angles other than V − 1; seed angles
+            that do not increase (an α_n <= 0) or coincide (α a multiple of 180); a span
+            of 180 degrees or more.
     """
     opts = options or SynthesisOptions()
-    seeds, alpha = _check_seeds(seeds, alpha)
+    seeds, steps = _check_seeds(seeds, alpha)
+    starts = _seed_angles(steps)
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1
     if geometry is None:
@@ -227,8 +274,8 @@ def synthesize_views(
         sel = (pair == n).nonzero().flatten()
         if sel.numel() == 0:
             continue
-        warp = NovelViewWarp(alpha, opts.center, max_stretch=opts.max_stretch, elevation=geo.elevation)
-        maps = warp.maps(geo.correspondence, theta[sel] - n * alpha)
+        warp = NovelViewWarp(steps[n], opts.center, max_stretch=opts.max_stretch, elevation=geo.elevation)
+        maps = warp.maps(geo.correspondence, theta[sel] - starts[n])
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
         if opts.extent:
             # The foreground mask rides along as one more channel: one warp for both.
