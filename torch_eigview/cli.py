@@ -75,7 +75,12 @@ def build_parser() -> argparse.ArgumentParser:
     coil.add_argument("--center", type=float, default=0.0, help="pose of the first seed view, degrees")
     coil.add_argument("--views", type=int, default=2, choices=(2, 3), help="seed views per object")
     coil.add_argument(
-        "--synth", type=float, nargs=3, default=(-20.0, 20.0, 1.0), metavar=("START", "STOP", "STEP")
+        "--synth",
+        type=float,
+        nargs=3,
+        default=(-20.0, 20.0, 1.0),
+        metavar=("START", "STOP", "STEP"),
+        help="synthesized angles for two seed views; each further seed extends the range by alpha",
     )
     coil.add_argument("--test", type=float, nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP"))
     coil.add_argument("--components", type=_components, default=15, help="k, or an energy fraction in (0, 1)")
