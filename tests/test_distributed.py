@@ -118,3 +118,42 @@ def test_needs_initialized_group() -> None:
         pytest.skip("a process group is already initialized")
     with pytest.raises(RuntimeError, match="init_process_group"):
         fit_distributed(_data(), K)
+
+
+def _stall_worker(rank: int, world: int, port: int, out: str) -> None:
+    """Rank 1 stalls past the group's 3 s timeout before its first collective."""
+    import time
+
+    dist.init_process_group(
+        "gloo",
+        init_method=f"tcp://127.0.0.1:{port}",
+        rank=rank,
+        world_size=world,
+        timeout=datetime.timedelta(seconds=3),
+    )
+    t0 = time.perf_counter()
+    try:
+        if rank == 1:
+            time.sleep(8)
+        fit_distributed(_shard(rank), K)
+        result: object = "no error"
+    except (TimeoutError, RuntimeError) as err:
+        result = (type(err).__name__, str(err))
+    elapsed = time.perf_counter() - t0
+    torch.save({"result": result, "elapsed": elapsed}, Path(out) / f"stall{rank}.pt")
+    try:
+        dist.destroy_process_group()
+    except Exception:  # the group may be broken already; the results are saved
+        pass
+
+
+def test_collective_timeout_is_an_error_on_every_rank(tmp_path: Path) -> None:
+    """A stalled rank: the waiting rank raises when the timeout passes, no hang; the stalled
+    rank finds its peer gone and raises too."""
+    mp.spawn(_stall_worker, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=True)
+    r0, r1 = (torch.load(tmp_path / f"stall{r}.pt", weights_only=False) for r in range(2))
+    assert r0["result"][0] == "TimeoutError", r0
+    assert "rank 0" in r0["result"][1] and "timeout" in r0["result"][1]
+    assert r0["elapsed"] < 8  # ended by the 3 s timeout, not by rank 1 coming back
+    assert r1["result"] != "no error", r1
+    assert r1["elapsed"] < 8 + 30

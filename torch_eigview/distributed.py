@@ -30,7 +30,7 @@ import argparse
 import datetime
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 import torch.distributed as dist
@@ -55,6 +55,28 @@ def _local_problem(views: object) -> str | None:
     if not bool(torch.isfinite(views).all()):
         return "views must be finite, got NaN or infinite values"
     return None
+
+
+def _collective(rank: int, what: str, fn: Callable[..., object], *args: object, **kwargs: object) -> None:
+    """Runs one collective; a timeout or a lost peer becomes a clear error on this rank.
+
+    The process group's ``timeout`` bounds every collective (gloo and nccl raise when it
+    passes), so a rank that stalls or dies ends the others' wait with this error instead of
+    a hang; the stalled rank, when it comes back, finds its peers gone and raises too.
+    """
+    try:
+        fn(*args, **kwargs)
+    except RuntimeError as err:  # DistBackendError, DistNetworkError and gloo's errors
+        text = str(err)
+        if "timed out" in text.lower() or "timeout" in text.lower():
+            raise TimeoutError(
+                f"fit_distributed on rank {rank}: {what} did not complete within the process group's "
+                f"timeout: a rank stalled or died ({text.splitlines()[0] if text else type(err).__name__})"
+            ) from err
+        raise RuntimeError(
+            f"fit_distributed on rank {rank}: {what} failed, a peer rank left or the group broke "
+            f"({text.splitlines()[0] if text else type(err).__name__})"
+        ) from err
 
 
 def fit_distributed(
@@ -82,7 +104,10 @@ def fit_distributed(
         A fitted ``Eigenspace``, the same on every rank.
 
     Raises:
-        RuntimeError: torch.distributed is not initialized.
+        RuntimeError: torch.distributed is not initialized, or a collective failed because
+            a peer rank left.
+        TimeoutError: a collective did not complete within the process group's timeout
+            (``init_process_group(timeout=...)``): a rank stalled or died.
         ValueError: on every rank, when any rank has no views, bad or non-finite views, or
             a view shape or dtype different from rank 0's; ``n_components`` above the rank.
     """
@@ -97,7 +122,14 @@ def fit_distributed(
     if problem is None:
         meta = (int(views.shape[0]), tuple(int(s) for s in views.shape[1:]), str(views.dtype))
     gathered: list[object] = [None] * world
-    dist.all_gather_object(gathered, (problem, meta), group=group)
+    _collective(
+        rank,
+        "the all_gather of the shards' shapes",
+        dist.all_gather_object,
+        gathered,
+        (problem, meta),
+        group=group,
+    )
     records: list[tuple[str | None, tuple[int, tuple[int, ...], str] | None]] = gathered  # type: ignore[assignment]
     errors = [f"rank {r}: {p}" for r, (p, _) in enumerate(records) if p is not None]
     if errors:
@@ -123,7 +155,7 @@ def fit_distributed(
     n_features = x.shape[1]
 
     def all_reduce(t: torch.Tensor) -> torch.Tensor:
-        dist.all_reduce(t, group=group)
+        _collective(rank, "an all_reduce", dist.all_reduce, t, group=group)
         return t
 
     with torch.no_grad():
@@ -145,7 +177,10 @@ def fit_distributed(
             gram = torch.zeros(n_views, n_views, dtype=torch.float64, device=x.device)
             for src in range(world):
                 other = xc if src == rank else xc.new_empty(counts[src], n_features)
-                dist.broadcast(other, src=dist.get_global_rank(group, src) if group else src, group=group)
+                root = dist.get_global_rank(group, src) if group else src
+                _collective(
+                    rank, f"the broadcast of rank {src}'s shard", dist.broadcast, other, src=root, group=group
+                )
                 gram[lo:hi, offsets[src] : offsets[src] + counts[src]] = (xc @ other.T).double()
                 del other
             gram = all_reduce(gram)
