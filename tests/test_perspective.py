@@ -127,7 +127,10 @@ def test_device_and_dtype_kept(scene: tuple, camera: PerspectiveCamera, device: 
     expected = warp(seeds[0], seeds[1], correspondence=corr, thetas=[5.0])
     for dtype in (torch.float32, torch.float64):
         out = warp(
-            seeds[0].to(device, dtype), seeds[1].to(device, dtype), correspondence=corr.to(device), thetas=[5.0]
+            seeds[0].to(device, dtype),
+            seeds[1].to(device, dtype),
+            correspondence=corr.to(device),
+            thetas=[5.0],
         )
         assert out.device.type == device.type and out.dtype == dtype
         torch.testing.assert_close(out.cpu().float(), expected, rtol=0, atol=1e-4)
