@@ -28,6 +28,7 @@ PUBLIC = [
     "StreamingEigenspace",
     "SynthesisOptions",
     "SynthesizedViews",
+    "ViewCache",
     "WarpMaps",
     "affine_coefficients",
     "blocks_of",

@@ -53,6 +53,7 @@ if TYPE_CHECKING:
         transfer_points,
         trifocal_tensor,
     )
+    from torch_eigview.view_cache import ViewCache
     from torch_eigview.warp import NovelViewWarp, WarpMaps
 
 __version__ = "0.1.0"
@@ -104,6 +105,7 @@ _SOURCES = {
     "render_views": "synthetic",
     "view_correspondence": "synthetic",
     "NovelViewWarp": "warp",
+    "ViewCache": "view_cache",
     "WarpMaps": "warp",
 }
 
@@ -128,6 +130,7 @@ __all__ = [
     "StreamingEigenspace",
     "SynthesisOptions",
     "SynthesizedViews",
+    "ViewCache",
     "WarpMaps",
     "affine_coefficients",
     "blocks_of",
