@@ -228,3 +228,14 @@ def test_synth_cli_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as info:
         main(["synth", "--shapes", "head,teapot"])
     assert info.value.code == 2 and "--shapes has unknown shape(s) ['teapot']" in capsys.readouterr().err
+
+
+def test_demo_three_views_range_follows_the_seeds() -> None:
+    from torch_eigview.demo import SyntheticScene, synthetic_gallery
+
+    scene = SyntheticScene(shapes=("egg",), camera=OrthographicCamera(24))
+    views, thetas = synthetic_gallery(scene, "egg", 10.0, 3, correspondences="exact")
+    assert thetas[0] == -25.0 and thetas[-1] == 25.0 and views.shape[0] == 51
+    # The seeds (-10, 0, 10) come out as rendered: each seed pair reproduces its own views.
+    seeds = scene.views("egg", [-10.0, 0.0, 10.0])
+    torch.testing.assert_close(views[[15, 25, 35]], seeds, rtol=0, atol=1e-5)

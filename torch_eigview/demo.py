@@ -202,8 +202,10 @@ def synthetic_gallery(
     """Synthesized views of one object from its ``n_views`` rendered seed views.
 
     Two seed views lie at 0° and α, three at −α, 0°, α (the test range's centre in the
-    middle). The default ``synth`` is −20°..20° at 1° (the paper's), widened to −α..α for
-    three views when α > 20° so that every seed pair contributes.
+    middle). The default ``synth`` is −20°..20° at 1° (the paper's) for two views; for three
+    it follows the seeds as in the COIL experiment (:meth:`CoilExperiment.synth_range`): the
+    two-view range widened by one α, here α/2 on each side of the centred seeds,
+    −(20 + α/2)..20 + α/2.
 
     Args:
         scene: objects and camera.
@@ -223,7 +225,7 @@ def synthetic_gallery(
         raise ValueError(f"n_views must be 2 or 3, got {n_views}")
     first = 0.0 if n_views == 2 else -alpha
     if synth is None:
-        reach = 20.0 if n_views == 2 else max(20.0, alpha)
+        reach = 20.0 if n_views == 2 else 20.0 + alpha / 2
         synth = (-reach, reach, 1.0)
     thetas = angle_range(*synth, name="synth")
     if not _is_plain_orthographic(scene.camera):
