@@ -250,7 +250,17 @@ def test_affine_residual_is_an_error_where_eq2_cannot_hold() -> None:
     tilt = torch.tensor([[40.0, 0.0, 0.0], [0.0, -38.0, 12.0]])
     with pytest.raises(ValueError, match=r"rows do not stay rows"):
         affine_coefficients(tilt, 10.0, [5.0])
-    # At the seed angles the system holds whatever the camera: only y's motion remains.
+    # The warp refuses such cameras when it is built, not only when it warps.
+    from torch_eigview.warp import NovelViewWarp
+
+    with pytest.raises(ValueError, match=r"depends on the height"):
+        NovelViewWarp(10.0, camera=cam)
+    with pytest.raises(ValueError, match=r"rows do not stay rows"):
+        NovelViewWarp(10.0, camera=tilt)
+    # Rows must stay rows between the seeds too, whatever the novel angle.
+    with pytest.raises(ValueError, match=r"rows do not stay rows"):
+        affine_coefficients(tilt, 10.0, [0.0])
+    # At the seed angles the x system holds whatever the camera: only y's motion remains.
     assert float(affine_coefficients(cam, 10.0, [0.0, 10.0], tol=math.inf).residual.max()) < 1e-12
 
 

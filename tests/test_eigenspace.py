@@ -251,3 +251,10 @@ def test_not_fitted() -> None:
 def test_repr() -> None:
     assert repr(Eigenspace()) == "Eigenspace(n_components=15, solver='auto')"
     assert repr(Eigenspace(0.99, solver="gram")) == "Eigenspace(n_components=0.99, solver='gram')"
+
+
+def test_identical_views_are_a_clear_error_for_every_k() -> None:
+    """A zero centred Gram matrix: the leading-pairs solver must not leak a solver error."""
+    for k in (15, 0.9):
+        with pytest.raises(ValueError, match="rank 0 after centring"):
+            Eigenspace(k).fit(torch.full((300, 1, 16, 16), 0.5))

@@ -64,7 +64,7 @@ def test_bad_input() -> None:
             ValueError, match=r"views must have the view shape of the first block \(1, 4, 4\)"
         ):
             cache.append(torch.rand(2, 1, 4, 5))
-        with pytest.raises(ValueError, match=r"views must be finite"):
+        with pytest.raises(ValueError, match=r"views \(as torch.float32\) must be finite"):
             cache.append(torch.full((1, 1, 4, 4), float("nan")))
         with pytest.raises(ValueError, match=r"P_i >= 1"):
             cache.append(torch.rand(0, 1, 4, 4))
@@ -80,3 +80,26 @@ def test_bench_pipeline_case_runs() -> None:
 
     row = _worker({"kind": "pipeline", "objects": 3, "size": 32, "channels": 3, "k": 3, "max_views": 41})
     assert row["passes"] > 1 and 0 < row["synthesis_s"] <= row["seconds"]
+
+
+def test_closed_cache_and_float16_overflow() -> None:
+    cache = ViewCache(dtype=torch.float16)
+    with pytest.raises(ValueError, match=r"views \(as torch.float16\) must be finite"):
+        cache.append(torch.full((1, 1, 2, 2), 1e5))  # finite in float32, inf in float16
+    path = cache.path
+    cache.close()
+    assert not os.path.exists(path)
+    with pytest.raises(ValueError, match="closed ViewCache"):
+        cache.append(torch.rand(1, 1, 2, 2))
+    assert not os.path.exists(path)
+
+
+def test_file_removed_without_close() -> None:
+    import gc
+
+    cache = ViewCache()
+    cache.append(torch.rand(2, 1, 3, 3))
+    path = cache.path
+    del cache
+    gc.collect()
+    assert not os.path.exists(path)

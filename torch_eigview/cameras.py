@@ -90,7 +90,7 @@ class AffineCoefficients:
         center: column ``c`` of the rotation axis in the image (``t[0]``).
         residual: (T,) relative residual of the system per novel angle: the largest of
             ``|m R(θ) − a m − b m R(α)| / |m|`` (Eq. 2 for x) and
-            ``|M[1] R(θ) − M[1]| / |M[1]|`` (rows stay rows).
+            ``|M[1] R(φ) − M[1]| / |M[1]|`` at φ = θ and α (rows stay rows).
     """
 
     a: torch.Tensor
@@ -107,7 +107,7 @@ def _check_affine_camera(camera: object) -> tuple[torch.Tensor, torch.Tensor]:
         )
     if not camera.is_floating_point():
         raise TypeError(f"camera must have a floating dtype, got {camera.dtype}")
-    p = camera.detach().to(torch.float64)
+    p = camera.detach().to("cpu", torch.float64)  # a small constant: solved on the CPU
     if p.shape not in ((2, 3), (2, 4), (3, 4)):
         raise ValueError(
             f"camera must have shape (2, 3), (2, 4) or (3, 4) (an affine camera), got {tuple(p.shape)}"
@@ -181,7 +181,7 @@ def affine_coefficients(
     alpha = check_alpha(alpha)
     if not (isinstance(tol, (int, float)) and not isinstance(tol, bool) and tol >= 0):
         raise ValueError(f"tol must be a non-negative number, got {tol!r}")
-    theta = as_angle_tensor(thetas, "thetas", dtype=torch.float64)
+    theta = as_angle_tensor(thetas, "thetas", dtype=torch.float64).cpu()
     row, row_y = m[0], m[1]
     if float(torch.hypot(row[0], row[2])) <= 1e-12 * float(row.norm()):
         raise ValueError(
@@ -195,7 +195,11 @@ def affine_coefficients(
     target = row @ r_theta  # (T, 3)
     sol = torch.linalg.lstsq(basis.expand(theta.numel(), 3, 2), target[..., None]).solution[..., 0]
     res_x = (basis @ sol[..., None])[..., 0].sub(target).norm(dim=-1) / row.norm()
-    res_y = (row_y @ r_theta - row_y).norm(dim=-1) / row_y.norm()
+    # Rows stay rows at the novel angle and between the seeds.
+    res_y = (
+        torch.maximum((row_y @ r_theta - row_y).norm(dim=-1), (row_y @ r_alpha - row_y).norm(dim=-1))
+        / row_y.norm()
+    )
     residual = torch.maximum(res_x, res_y)
     worst = int(residual.argmax())
     if float(residual[worst]) > tol:

@@ -13,6 +13,7 @@ and draws the eigenimages and, for one object, synthesized views beside rendered
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -187,6 +188,10 @@ def synthesis_error(
         seen1 = view_correspondence(obj, theta, 0.0, scene.camera, view_a=truth).visible
         seen2 = view_correspondence(obj, theta, alpha, scene.camera, view_a=truth).visible
         both = truth.mask & seen1 & seen2
+        if not bool(both.any()):
+            raise ValueError(
+                f"no pixel of {name!r} at theta={theta} is seen by both seed views (0 and {alpha})"
+            )
         errors.append(float((view[0] - truth.image[0]).abs()[both].mean()))
     return errors
 
@@ -204,8 +209,8 @@ def synthetic_gallery(
     Two seed views lie at 0° and α, three at −α, 0°, α (the test range's centre in the
     middle). The default ``synth`` is −20°..20° at 1° (the paper's) for two views; for three
     it follows the seeds as in the COIL experiment (:meth:`CoilExperiment.synth_range`): the
-    two-view range widened by one α, here α/2 on each side of the centred seeds,
-    −(20 + α/2)..20 + α/2.
+    two-view range widened by one α, here ⌈α/2⌉ on each side of the centred seeds,
+    −(20 + ⌈α/2⌉)..20 + ⌈α/2⌉ (on the 1° grid of the seeds and test views).
 
     Args:
         scene: objects and camera.
@@ -225,7 +230,8 @@ def synthetic_gallery(
         raise ValueError(f"n_views must be 2 or 3, got {n_views}")
     first = 0.0 if n_views == 2 else -alpha
     if synth is None:
-        reach = 20.0 if n_views == 2 else 20.0 + alpha / 2
+        # On the 1° grid of the seeds and test views: half an α each side, rounded up.
+        reach = 20.0 if n_views == 2 else 20.0 + math.ceil(abs(alpha) / 2)
         synth = (-reach, reach, 1.0)
     thetas = angle_range(*synth, name="synth")
     if not _is_plain_orthographic(scene.camera):

@@ -68,15 +68,17 @@ def _collective(rank: int, what: str, fn: Callable[..., object], *args: object, 
         fn(*args, **kwargs)
     except RuntimeError as err:  # DistBackendError, DistNetworkError and gloo's errors
         text = str(err)
+        first = text.splitlines()[0] if text else type(err).__name__
         if "timed out" in text.lower() or "timeout" in text.lower():
             raise TimeoutError(
                 f"fit_distributed on rank {rank}: {what} did not complete within the process group's "
-                f"timeout: a rank stalled or died ({text.splitlines()[0] if text else type(err).__name__})"
+                f"timeout: a rank stalled or died ({first})"
             ) from err
-        raise RuntimeError(
-            f"fit_distributed on rank {rank}: {what} failed, a peer rank left or the group broke "
-            f"({text.splitlines()[0] if text else type(err).__name__})"
-        ) from err
+        if isinstance(err, dist.DistError) or "connection" in text.lower() or "gloo" in text.lower():
+            raise RuntimeError(
+                f"fit_distributed on rank {rank}: {what} failed, a peer rank left or the group broke ({first})"
+            ) from err
+        raise
 
 
 def fit_distributed(

@@ -138,7 +138,9 @@ class PerspectiveWarp(NovelViewWarp):
         grow: int = 2,
     ) -> None:
         super().__init__(alpha, max_stretch=max_stretch)
-        self.register_buffer("K", _check_intrinsics(K), persistent=False)
+        # A CPU float64 constant, not a buffer: the camera geometry is built in float64 on the
+        # CPU and moved to the correspondences' device, whatever .to() did to the module.
+        self.K = _check_intrinsics(K)
         dist = check_number(distance, "distance")
         if not (math.isfinite(dist) and dist > 0):
             raise ValueError(f"distance={distance} must be a positive finite number")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import weakref
 from collections.abc import Iterator
 from types import TracebackType
 
@@ -24,6 +25,11 @@ from torch_eigview.errors import check_finite, check_float_tensor
 __all__ = ["ViewCache"]
 
 _DTYPES = {torch.float32: np.float32, torch.float16: np.float16, torch.float64: np.float64}
+
+
+def _remove(path: str) -> None:
+    if os.path.exists(path):
+        os.remove(path)
 
 
 class ViewCache:
@@ -54,6 +60,9 @@ class ViewCache:
         os.close(fd)
         self._blocks: list[tuple[int, tuple[int, ...]]] = []  # (byte offset, shape)
         self._end = 0
+        self._closed = False
+        # The file goes with the object even when close() is never called.
+        self._finalizer = weakref.finalize(self, _remove, self.path)
 
     @property
     def n_views(self) -> int:
@@ -68,6 +77,8 @@ class ViewCache:
             ValueError: non-finite values, no views, or a view shape different from the
                 first block's.
         """
+        if self._closed:
+            raise ValueError("views cannot be appended to a closed ViewCache (its file is deleted)")
         v = check_float_tensor(views, "views")
         if v.ndim < 2 or v.shape[0] == 0:
             raise ValueError(f"views must have shape (P_i, ...) with P_i >= 1, got {tuple(v.shape)}")
@@ -75,8 +86,9 @@ class ViewCache:
             raise ValueError(
                 f"views must have the view shape of the first block {self._blocks[0][1][1:]}, got {tuple(v.shape[1:])}"
             )
-        check_finite(v, "views")
-        data = v.detach().to("cpu", self.dtype).contiguous().numpy()
+        stored = v.detach().to("cpu", self.dtype).contiguous()
+        check_finite(stored, f"views (as {self.dtype})")  # after the cast: float16 overflows above 65504
+        data = stored.numpy()
         with open(self.path, "ab") as fh:
             fh.write(data.tobytes())
         self._blocks.append((self._end, tuple(v.shape)))
@@ -93,10 +105,9 @@ class ViewCache:
                 yield torch.from_numpy(data).reshape(shape).to(out_dtype)
 
     def close(self) -> None:
-        """Deletes the file (idempotent)."""
-        if os.path.exists(self.path):
-            os.remove(self.path)
-        self._blocks, self._end = [], 0
+        """Deletes the file (idempotent); the cache takes no more views."""
+        self._finalizer()
+        self._blocks, self._end, self._closed = [], 0, True
 
     def __enter__(self) -> ViewCache:
         return self

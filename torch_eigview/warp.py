@@ -300,12 +300,13 @@ class NovelViewWarp(torch.nn.Module):
             raise ValueError(f"elevation={elevation} must be an angle in degrees in (-90, 90)")
         self.camera: torch.Tensor | None = None
         if camera is not None:
-            affine_coefficients(camera, self.alpha, [0.0])  # validates the camera now
+            # Validates the camera now, at an angle where Eq. 2 is a real constraint.
+            affine_coefficients(camera, self.alpha, [self.alpha / 2, -self.alpha])
             if self.elevation != 0.0:
                 raise ValueError(
                     f"elevation={elevation} must be 0 with an affine camera (its rows stay rows)"
                 )
-            self.camera = camera.detach().to(torch.float64).clone()
+            self.camera = camera.detach().to("cpu", torch.float64).clone()
 
     def extra_repr(self) -> str:
         return (
