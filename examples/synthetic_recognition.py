@@ -1,7 +1,7 @@
 """Fig. 2(ii) of the paper on the five synthetic objects: our accuracy beside the paper's.
 
 For α ∈ {5, 10, 15, 20, 30} and N ∈ {2, 3} seed views per object (0°, α; or −α, 0°, α),
-the views synthesized every 1° over −20°..20° (three views: −(20 + α/2)..20 + α/2, the
+the views synthesized every 1° over −20°..20° (three views: −(20 + ⌈α/2⌉)..20 + ⌈α/2⌉, the
 range following the seeds as in the COIL experiment), one
 eigenspace of 15 components over all objects, 1-NN on the 450 rendered test views
 (−45°..44°, 1°). Correspondences between the seed views are estimated by TV-L1 optical
