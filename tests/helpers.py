@@ -142,17 +142,10 @@ def warp_errors(
     """Mean absolute error per angle of ``warp``'s views from renders at 0 and ``alpha``
     against renders at ``thetas``, over the pixels both seed views see (the paper's
     per-pixel error; intensities in [0, 1])."""
-    from torch_eigview.synthetic import render, view_correspondence
+    from torch_eigview.synthetic import render, seen_error
     from torch_eigview.warp import NovelViewWarp
 
     r1, r2 = render(obj, 0.0, camera), render(obj, alpha, camera)
     warp = NovelViewWarp(alpha) if warp is None else warp
     views = warp(r1.image, r2.image, correspondence=corr, thetas=list(thetas))
-    errors = []
-    for i, theta in enumerate(thetas):
-        truth = render(obj, theta, camera)
-        seen1 = view_correspondence(obj, theta, 0.0, camera, view_a=truth).visible
-        seen2 = view_correspondence(obj, theta, alpha, camera, view_a=truth).visible
-        both = truth.mask & seen1 & seen2
-        errors.append(float((views[i, 0] - truth.image[0]).abs()[both].mean()))
-    return errors
+    return [seen_error(obj, camera, views[i], theta, (0.0, alpha)) for i, theta in enumerate(thetas)]

@@ -34,14 +34,18 @@ def _shard(rank: int) -> torch.Tensor:
     return x[:20] if rank == 0 else x[20:]
 
 
-def _worker(rank: int, world: int, port: int, out: str) -> None:
+def _init(rank: int, world: int, port: int, timeout_s: float) -> None:
     dist.init_process_group(
         "gloo",
         init_method=f"tcp://127.0.0.1:{port}",
         rank=rank,
         world_size=world,
-        timeout=datetime.timedelta(seconds=30),
+        timeout=datetime.timedelta(seconds=timeout_s),
     )
+
+
+def _worker(rank: int, world: int, port: int, out: str) -> None:
+    _init(rank, world, port, 30)
     results: dict[str, object] = {}
     try:
         exact = fit_distributed(_shard(rank), K)
@@ -124,13 +128,7 @@ def _stall_worker(rank: int, world: int, port: int, out: str) -> None:
     """Rank 1 stalls past the group's 3 s timeout before its first collective."""
     import time
 
-    dist.init_process_group(
-        "gloo",
-        init_method=f"tcp://127.0.0.1:{port}",
-        rank=rank,
-        world_size=world,
-        timeout=datetime.timedelta(seconds=3),
-    )
+    _init(rank, world, port, 3)
     t0 = time.perf_counter()
     try:
         if rank == 1:

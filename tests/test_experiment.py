@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -20,27 +21,19 @@ SECONDS_KEYS = {"correspondence", "synthesis", "eigen", "recognition", "total"}
 
 # Short ranges and 3 components keep the whole module at a few seconds; elevation 0 skips
 # the 2D refinement of the tilted camera, the costliest part of the synthesis.
+_NVS = CoilExperiment(
+    alpha=ALPHA,
+    synth=(-5.0, 10.0, 5.0),
+    test=TEST,
+    components=3,
+    method="nvs",
+    objects=OBJECTS,
+    synthesis=SynthesisOptions(elevation=0.0),
+)
 CONFIGS: dict[str, CoilExperiment] = {
-    "nvs": CoilExperiment(
-        alpha=ALPHA,
-        synth=(-5.0, 10.0, 5.0),
-        test=TEST,
-        components=3,
-        method="nvs",
-        objects=OBJECTS,
-        synthesis=SynthesisOptions(elevation=0.0),
-    ),
+    "nvs": _NVS,
     # Three seeds at 0, 10, 20: the synthesized range follows them, -5..20 every 5 degrees.
-    "nvs3": CoilExperiment(
-        alpha=ALPHA,
-        views=3,
-        synth=(-5.0, 10.0, 5.0),
-        test=TEST,
-        components=3,
-        method="nvs",
-        objects=OBJECTS,
-        synthesis=SynthesisOptions(elevation=0.0),
-    ),
+    "nvs3": dataclasses.replace(_NVS, views=3),
     "sparse": CoilExperiment(alpha=ALPHA, test=TEST, components=3, method="sparse", objects=OBJECTS),
     "sparse3": CoilExperiment(
         alpha=ALPHA, views=3, test=TEST, components=3, method="sparse", objects=OBJECTS

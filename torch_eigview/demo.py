@@ -26,7 +26,7 @@ from torch_eigview.experiment import angle_range
 from torch_eigview.perspective import PerspectiveWarp
 from torch_eigview.projection import EigenProjection
 from torch_eigview.recognition import NearestNeighborRecognizer
-from torch_eigview.synthesis import PairGeometry, SynthesisOptions, synthesize_views
+from torch_eigview.synthesis import PairGeometry, SynthesisOptions, pair_of, synthesize_views
 from torch_eigview.synthetic import (
     CAMERAS,
     SHAPES,
@@ -36,7 +36,7 @@ from torch_eigview.synthetic import (
     exact_correspondence,
     exact_correspondence_2d,
     render,
-    view_correspondence,
+    seen_error,
 )
 from torch_eigview.synthetic_shapes import SyntheticObject, make_object
 from torch_eigview.warp import NovelViewWarp
@@ -151,11 +151,11 @@ def _camera_gallery(
     thetas: list[float],
     correspondences: str,
 ) -> torch.Tensor:
-    """Views at ``thetas`` for an affine or perspective camera: each angle from the seed
-    pair of its sector (below the second seed: the first pair; the rest: the last)."""
+    """Views at ``thetas`` for an affine or perspective camera, each angle from the seed
+    pair :func:`~torch_eigview.synthesis.pair_of` routes it to."""
     warp = camera_warp(scene.camera, alpha)
     rel = torch.tensor(thetas, dtype=torch.float64) - first
-    pair = torch.clamp(torch.floor(rel / alpha), 0, n_views - 2).long()
+    pair = pair_of(rel, alpha, n_views)
     out: list[torch.Tensor | None] = [None] * len(thetas)
     for n in range(n_views - 1):
         sel = (pair == n).nonzero().flatten().tolist()
@@ -182,18 +182,9 @@ def synthesis_error(
     """
     obj = scene.object(name)
     views = _camera_gallery(scene, name, alpha, 0.0, 2, list(thetas), correspondences)
-    errors = []
-    for view, theta in zip(views, thetas, strict=True):
-        truth = render(obj, float(theta), scene.camera)
-        seen1 = view_correspondence(obj, theta, 0.0, scene.camera, view_a=truth).visible
-        seen2 = view_correspondence(obj, theta, alpha, scene.camera, view_a=truth).visible
-        both = truth.mask & seen1 & seen2
-        if not bool(both.any()):
-            raise ValueError(
-                f"no pixel of {name!r} at theta={theta} is seen by both seed views (0 and {alpha})"
-            )
-        errors.append(float((view[0] - truth.image[0]).abs()[both].mean()))
-    return errors
+    return [
+        seen_error(obj, scene.camera, v, float(t), (0.0, alpha)) for v, t in zip(views, thetas, strict=True)
+    ]
 
 
 def synthetic_gallery(

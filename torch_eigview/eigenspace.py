@@ -133,18 +133,19 @@ def _eigh_descending(scatter: torch.Tensor, top: int | None) -> tuple[torch.Tens
     n = scatter.shape[0]
     if top is not None and scatter.device.type == "cpu" and n >= 256 and top <= n // 4:
         from scipy.linalg import eigh  # scikit-image depends on SciPy
-        from scipy.sparse.linalg import ArpackError, eigsh
+        from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
         a = scatter.numpy()
         with _single_threaded_blas() if n <= 2048 else contextlib.nullcontext():
             # Not the ones vector: it spans the null space of a centred Gram matrix.
             v0 = np.random.default_rng(0).standard_normal(n)
-            try:
-                if not a.any():  # a zero matrix (identical views): ARPACK cannot start
-                    raise ArpackError(-9)
-                w, v = eigsh(a, k=top, which="LA", tol=0, v0=v0, ncv=min(n, max(2 * top + 1, 48)))
-            except ArpackError:  # no convergence (ArpackNoConvergence) or no Krylov space
-                w, v = eigh(a, subset_by_index=[n - top, n - 1], driver="evr", check_finite=False)
+            found = None
+            if a.any():  # ARPACK cannot start on a zero matrix (identical views)
+                try:
+                    found = eigsh(a, k=top, which="LA", tol=0, v0=v0, ncv=min(n, max(2 * top + 1, 48)))
+                except ArpackNoConvergence:
+                    pass
+            w, v = found or eigh(a, subset_by_index=[n - top, n - 1], driver="evr", check_finite=False)
         order = np.argsort(w)[::-1].copy()
         return torch.from_numpy(w[order]), torch.from_numpy(np.ascontiguousarray(v[:, order]))
     w, v = torch.linalg.eigh(scatter)

@@ -134,12 +134,16 @@ def pair_of(thetas: object, alpha: float | Sequence[float], n_seeds: int) -> tor
     """
     if isinstance(n_seeds, bool) or not isinstance(n_seeds, int) or n_seeds < 2:
         raise ValueError(f"n_seeds must be an int >= 2, got {n_seeds!r}")
-    steps = _steps(alpha, n_seeds)
-    theta = as_angle_tensor(thetas, "thetas", dtype=torch.float64)
+    return _pair_index(as_angle_tensor(thetas, "thetas", dtype=torch.float64), _steps(alpha, n_seeds))
+
+
+def _pair_index(theta: torch.Tensor, steps: list[float]) -> torch.Tensor:
+    """:func:`pair_of` for validated angles (T,) and per-pair angles."""
+    last = len(steps) - 1
     if len(set(steps)) == 1:  # one alpha, either sign
-        return torch.clamp(torch.floor(theta / steps[0]), 0, n_seeds - 2).long()
+        return torch.clamp(torch.floor(theta.double() / steps[0]), 0, last).long()
     starts = torch.tensor(_seed_angles(steps), dtype=torch.float64)
-    return torch.clamp(torch.searchsorted(starts, theta, right=True) - 1, 0, n_seeds - 2).long()
+    return torch.clamp(torch.searchsorted(starts, theta.double(), right=True) - 1, 0, last).long()
 
 
 def _seed_angles(steps: list[float]) -> list[float]:
@@ -266,7 +270,7 @@ def synthesize_views(
         geometry = pair_geometry(seeds, alpha, opts)
     elif len(geometry) != n_pairs:
         raise ValueError(f"geometry must hold one record per seed pair ({n_pairs}), got {len(geometry)}")
-    pair = pair_of(theta, alpha, seeds.shape[0])
+    pair = _pair_index(theta, steps)
     out = seeds.new_empty((theta.numel(), *seeds.shape[1:]))
     seconds = {"correspondence": sum(g.seconds for g in geometry), "synthesis": 0.0}
     for n, geo in enumerate(geometry):

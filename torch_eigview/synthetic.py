@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from torch_eigview.cameras import rotation_y
 from torch_eigview.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.errors import check_number
 from torch_eigview.synthetic_shapes import SHAPES, SyntheticObject, make_object
@@ -44,6 +45,7 @@ __all__ = [
     "make_object",
     "render",
     "render_views",
+    "seen_error",
     "view_correspondence",
 ]
 
@@ -65,9 +67,7 @@ def _check_size(size: object) -> tuple[int, int]:
 
 def _rotation(theta_deg: float) -> torch.Tensor:
     """(3, 3) R with ``Pc = R @ P`` (object frame → camera frame at angle θ)."""
-    t = math.radians(theta_deg)
-    c, s = math.cos(t), math.sin(t)
-    return torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]], dtype=_DT)
+    return rotation_y(torch.tensor(math.radians(theta_deg), dtype=_DT))
 
 
 class _Camera:
@@ -498,3 +498,24 @@ def exact_correspondence_2d(
         out.append((dx[None], dy[None], corr.mask_a[None]))
     (d12, v12, m12), (d21, v21, m21) = out
     return Correspondence(d12, d21, m12, m21, v12, v21)
+
+
+def seen_error(
+    obj: SyntheticObject, camera: _Camera, view: torch.Tensor, theta: float, seed_angles: tuple[float, ...]
+) -> float:
+    """Per-pixel mean absolute error of ``view`` (1, H, W) against the render at ``theta``.
+
+    Over the object's pixels at ``theta`` that every seed view (at ``seed_angles``) sees:
+    the paper's per-pixel error "except occluded pixels". Intensities are in [0, 1], so
+    0.01 is 1%.
+
+    Raises:
+        ValueError: no pixel is seen by every seed view.
+    """
+    truth = render(obj, theta, camera)
+    both = truth.mask.clone()
+    for seed in seed_angles:
+        both &= view_correspondence(obj, theta, seed, camera, view_a=truth).visible
+    if not bool(both.any()):
+        raise ValueError(f"no pixel at theta={theta} is seen by every seed view {seed_angles}")
+    return float((view[0].to(truth.image.dtype) - truth.image[0]).abs()[both].mean())

@@ -439,8 +439,7 @@ def _homogeneous(p: torch.Tensor) -> torch.Tensor:
 
 def _transfer(t: torch.Tensor, x1: torch.Tensor, line: torch.Tensor, rtol: float) -> torch.Tensor:
     """``x1^i l_j T_i^{jk}``, with NaN where the point is numerically 0/0 (the line is epipolar)."""
-    # (x1 · T) first, one (N, 3) @ (3, 9) product, then the line: 20x faster than a 3-operand einsum.
-    x3 = ((x1 @ t.reshape(3, 9)).unflatten(-1, (3, 3)) * line[..., :, None]).sum(dim=-2)
+    x3 = torch.einsum("...i,...j,ijk->...k", x1, line, t)
     bound = x1.norm(dim=-1) * line.norm(dim=-1) * t.norm()
     degenerate = x3.norm(dim=-1) <= rtol * bound
     return torch.where(degenerate[..., None], torch.full_like(x3, math.nan), x3)
