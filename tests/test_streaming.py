@@ -98,6 +98,25 @@ def test_not_regenerable_raises() -> None:
         StreamingEigenspace(4).fit(source)
 
 
+@pytest.mark.parametrize("method", ["exact", "randomized"])
+@pytest.mark.parametrize("bad_pass", [2, 3])
+def test_non_finite_on_a_later_pass_raises(method: str, bad_pass: int) -> None:
+    """Finiteness is scanned on the first pass only; a later pass that turns non-finite
+    is caught in what the fit accumulates, never returned as a NaN eigenspace."""
+    x = make_views(30, 50)
+    state = {"n": 0}
+
+    def source():  # type: ignore[no-untyped-def]
+        state["n"] += 1
+        y = x.clone()
+        if state["n"] >= bad_pass:
+            y[17, 4] = float("inf")
+        return (y[i : i + 10] for i in range(0, 30, 10))
+
+    with pytest.raises(ValueError, match="non-finite values on a later pass"):
+        StreamingEigenspace(4, method=method).fit(source)
+
+
 def test_bad_blocks() -> None:
     x = make_views(30, 50)
     with pytest.raises(ValueError, match=r"like the first block"):
