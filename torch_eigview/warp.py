@@ -82,47 +82,63 @@ def invert_row_map(
     """
     b, t, h, w = dst_x_for_src.shape
     dtype, device = dst_x_for_src.dtype, dst_x_for_src.device
+    n = b * t * h * w
     f0, f1 = dst_x_for_src[..., :-1], dst_x_for_src[..., 1:]
     length = f1 - f0
     valid = valid[:, None] if valid.ndim == 3 else valid
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
-    out = torch.full((b * t * h * w,), math.nan, dtype=dtype, device=device)
-    hit = torch.zeros(b * t * h * w, dtype=torch.bool, device=device)
     if w < 2 or not bool(seg_ok.any()):
-        return out.view(b, t, h, w), hit.view(b, t, h, w)
+        return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
     first = torch.ceil(f0)
-    # Target columns first + m of each segment that lie inside it and inside the image.
-    # Most segments cover at most one column (views foreshorten), so slot m = 0 runs over
-    # all segments and the further slots only over the few longer ones.
-    room = torch.where(seg_ok, f1 - first, -1.0).reshape(-1)  # slot m exists iff m <= room
-    first_flat = first.reshape(-1)
-    seg_parts, col_parts = [], []
-    cand = (room >= 0).nonzero().squeeze(1)
-    m = 0
+    room = torch.where(seg_ok, f1 - first, -1.0)  # slot m (target column first + m) exists iff m <= room
+
+    def interpolate(
+        frac: torch.Tensor, lo: torch.Tensor, d0: torch.Tensor | None, d1: torch.Tensor | None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        src = lo + frac
+        key = src if d0 is None or d1 is None else d0 + (d1 - d0) * frac
+        return src, key
+
+    # Slot 0, every segment at once (most segments cover at most one column: views
+    # foreshorten). Entries that are no target column go to a spare slot n with key -inf.
+    lo_col = torch.arange(w - 1, dtype=dtype, device=device)
+    ok0 = (room >= 0) & (first >= 0) & (first <= w - 1)
+    frac0 = (first - f0) / length
+    d0 = None if depth is None else depth[..., :-1]
+    d1 = None if depth is None else depth[..., 1:]
+    src0, key0 = interpolate(frac0, lo_col, d0, d1)
+    row0 = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
+    idx0 = torch.where(ok0, row0 + first.clamp(0, w - 1).long(), n).reshape(-1)
+    key0 = torch.where(ok0, key0, -math.inf).reshape(-1)
+    src0 = src0.reshape(-1)
+    # Slots m >= 1: only the few segments longer than a pixel, gathered.
+    room_flat, first_flat = room.reshape(-1), first.reshape(-1)
+    idx_parts, key_parts, src_parts = [idx0], [key0], [src0]
+    cand = (room_flat >= 1).nonzero().squeeze(1)
+    m = 1
     while cand.numel():
-        col_m = first_flat[cand] + m
+        col_m = first_flat.index_select(0, cand) + m
         keep = (col_m >= 0) & (col_m <= w - 1)
-        seg_parts.append(cand[keep])
-        col_parts.append(col_m[keep])
+        seg, col = cand[keep], col_m[keep]
+        frac = (col - f0.reshape(-1).index_select(0, seg)) / length.reshape(-1).index_select(0, seg)
+        lo = (seg % (w - 1)).to(dtype)
+        dd0 = None if d0 is None else d0.reshape(-1).index_select(0, seg)
+        dd1 = None if d1 is None else d1.reshape(-1).index_select(0, seg)
+        src_m, key_m = interpolate(frac, lo, dd0, dd1)
+        idx_parts.append((seg // (w - 1)) * w + col.long())
+        key_parts.append(key_m)
+        src_parts.append(src_m)
         m += 1
-        cand = cand[room[cand] >= m]
-    seg = torch.cat(seg_parts)
-    col = torch.cat(col_parts)
-    f0s = f0.reshape(-1)[seg]
-    frac = (col - f0s) / length.reshape(-1)[seg]
-    src = (seg % (w - 1)).to(dtype) + frac
-    if depth is None:
-        key = src
-    else:
-        d0 = depth[..., :-1].reshape(-1)[seg]
-        key = d0 + (depth[..., 1:].reshape(-1)[seg] - d0) * frac
-    idx = (seg // (w - 1)) * w + col.long()
-    best = torch.full((b * t * h * w,), -math.inf, dtype=dtype, device=device)
+        cand = cand[room_flat.index_select(0, cand) >= m]
+    idx, key, src = (torch.cat(p) if len(p) > 1 else p[0] for p in (idx_parts, key_parts, src_parts))
+    # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
+    best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
     best.scatter_reduce_(0, idx, key, reduce="amax")
-    win = (key >= best[idx]).nonzero().squeeze(1)
-    out.scatter_reduce_(0, idx[win], src[win], reduce="amax", include_self=False)
-    hit[idx] = True
-    return out.view(b, t, h, w), hit.view(b, t, h, w)
+    win = key >= best.index_select(0, idx)
+    out = torch.full((n + 1,), math.nan, dtype=dtype, device=device)
+    out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax", include_self=False)
+    hit = best[:n] != -math.inf
+    return out[:n].view(b, t, h, w), hit.view(b, t, h, w)
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
@@ -148,21 +164,26 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     return torch.where(hit, src, filled)
 
 
-def _sampler(fields: torch.Tensor) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
     """Bilinear sampler of ``fields`` (B, T, F, H, W) at pixel coordinates (B, T, H, W).
 
     These are maps, not images: sampled with ``grid_sample`` directly (border padding,
-    ``align_corners=True``, the convention kornia's ``remap`` uses for pixel maps), all F
-    fields in one call.
+    ``align_corners=True``, the convention kornia's ``remap`` uses for pixel maps), the
+    first ``n_fields`` of the F fields (default all) in one call.
     """
     b, t, f, h, w = fields.shape
     flat = fields.reshape(b * t, f, h, w)
     sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
+    grid = fields.new_empty(b, t, h, w, 2)  # written in place on every call
 
-    def sample(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-        grid = torch.stack([x * sx - 1, y * sy - 1], dim=-1).reshape(b * t, h, w, 2)
-        out = F.grid_sample(flat, grid, mode="bilinear", padding_mode="border", align_corners=True)
-        return out.view(b, t, f, h, w)
+    def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
+        torch.mul(x, sx, out=grid[..., 0]).sub_(1)
+        torch.mul(y, sy, out=grid[..., 1]).sub_(1)
+        src = flat if n_fields == f else flat[:, :n_fields]
+        out = F.grid_sample(
+            src, grid.view(b * t, h, w, 2), mode="bilinear", padding_mode="border", align_corners=True
+        )
+        return out.view(b, t, n_fields, h, w)
 
     return sample
 
@@ -228,7 +249,7 @@ def _refine_2d(
     sample = _sampler(torch.stack([dx, dy, valid_t], dim=2))
     sx, sy = src_x, yy - dy
     for _ in range(iters):
-        d = sample(sx, sy)
+        d = sample(sx, sy, 2)  # the displacement only; validity once, at the end
         sx, sy = xx - d[:, :, 0], yy - d[:, :, 1]
     d = sample(sx, sy)
     residual = (sx + d[:, :, 0] - xx).abs() + (sy + d[:, :, 1] - yy).abs()
