@@ -51,6 +51,7 @@ PUBLIC = [
     "render",
     "render_views",
     "save_recognizer",
+    "synthesize_objects",
     "synthesize_views",
     "transfer_points",
     "trifocal_tensor",

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from torch_eigview.kernel_projection import KernelProjection
     from torch_eigview.normalize import foreground_mask, normalize_extent
     from torch_eigview.operator import SparseViewOperator
+    from torch_eigview.parallel import synthesize_objects
     from torch_eigview.perspective import PerspectiveWarp
     from torch_eigview.projection import EigenProjection
     from torch_eigview.raster import invert_map_2d
@@ -92,6 +93,7 @@ _SOURCES = {
     "SynthesisOptions": "synthesis",
     "SynthesizedViews": "synthesis",
     "synthesize_views": "synthesis",
+    "synthesize_objects": "parallel",
     "StreamingEigenspace": "streaming",
     "blocks_of": "streaming",
     "fit_distributed": "distributed",
@@ -153,6 +155,7 @@ __all__ = [
     "render",
     "render_views",
     "save_recognizer",
+    "synthesize_objects",
     "synthesize_views",
     "transfer_points",
     "trifocal_tensor",
