@@ -203,6 +203,22 @@ def test_demo_small(tmp_path: object) -> None:
     assert result["accuracy"] == 100.0
 
 
+def test_rendered_gallery_is_the_ceiling() -> None:
+    """``correspondences="rendered"``: the gallery is the rendered views at the gallery's
+    angles (no synthesis), so the test views at those angles are recognized with their
+    exact pose; a synthesized gallery cannot do better on them."""
+    from torch_eigview.demo import SyntheticScene, recognition_experiment
+
+    scene = SyntheticScene(shapes=("head", "cylinder"), camera=OrthographicCamera(32))
+    result = recognition_experiment(10.0, 2, scene=scene, correspondences="rendered", test=(-20.0, 20.0))
+    assert result["n_gallery"] == 82 and result["accuracy"] == 100.0
+    assert result["pose_mae_deg"] == 0.0
+    with pytest.raises(
+        ValueError, match=r"correspondences must be one of \('flow', 'exact', 'rendered'\), got 'true'"
+    ):
+        recognition_experiment(10.0, 2, scene=scene, correspondences="true")
+
+
 @pytest.mark.parametrize("camera", ["affine", "perspective"])
 def test_synth_protocol_per_camera(camera: str, capsys: pytest.CaptureFixture[str]) -> None:
     """`eigview synth --camera`: Fig. 2's protocol with each camera model's synthesis."""
@@ -215,8 +231,11 @@ def test_synth_protocol_per_camera(camera: str, capsys: pytest.CaptureFixture[st
     assert record["n_test"] == 82 and record["accuracy"] >= 95.0
     errors = [e for errs in out["synthesis_error"].values() for e in errs]  # type: ignore[attr-defined]
     assert len(errors) == 4 and max(errors) < 0.02
+    (ceiling,) = out["ceiling"]  # type: ignore[misc]
+    assert ceiling["correspondences"] == "rendered" and ceiling["n_gallery"] == record["n_gallery"]
     printed = capsys.readouterr().out
     assert f"camera model: {camera}" in printed and "per-pixel mean abs error" in printed
+    assert "ceiling: the same protocol with the rendered views" in printed
 
 
 def test_synth_cli_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
