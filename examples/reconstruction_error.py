@@ -6,7 +6,10 @@ for the true set of views. For N ∈ {4, 6, 8, 12, 16, 24} equally spaced of the
 - ``sparse``: the eigenspace of those N views;
 - ``interpolated``: the eigenspace of those N views and 25·48/N views synthesized
   between every consecutive pair (each pair is a seed pair of its own, with TV-L1 flow
-  correspondences; ``interp-exact`` takes the renderer's exact correspondences).
+  correspondences; ``interp-exact`` takes the renderer's exact correspondences), with the
+  synthetic protocol's options (``demo.SYNTHETIC_OPTIONS``: silhouette-aware sampling
+  against the renders' black background, so that no synthesized silhouette pixel mixes
+  object and background).
 
 Both keep the components of 99% of the energy (``Eigenspace(n_components=0.99)``), as
 does the first line's reference, the eigenspace of all 48 views. The

@@ -442,3 +442,83 @@ def test_common_factor_needs_full_row_rank() -> None:
         rtol=0,
         atol=1e-12,
     )
+
+
+# --------------------------------------------------------------------------- silhouette-aware weights
+def _blob_masks(n_sources: int, seed: int) -> torch.Tensor:
+    """(S, H, W) bool foreground: an off-centre ellipse per seed (a silhouette to cross)."""
+    gen = _generator(seed)
+    yy = torch.arange(H, dtype=torch.float64).view(H, 1)
+    xx = torch.arange(W, dtype=torch.float64).view(1, W)
+    out = []
+    for _ in range(n_sources):
+        cy, cx = H / 2 + torch.rand(1, generator=gen).item(), W / 2 + 2 * torch.rand(1, generator=gen).item()
+        out.append(((yy - cy) / (0.38 * H)) ** 2 + ((xx - cx) / (0.33 * W)) ** 2 <= 1)
+    return torch.stack(out)
+
+
+def _silhouette_loop(images: torch.Tensor, maps: WarpMaps, masks: torch.Tensor) -> torch.Tensor:
+    """Slow reference: per target pixel, the bilinear taps of every source with the blend
+    weight, foreground taps only, renormalized; background below a foreground share of 1/2."""
+    s, _, t, h, w = maps.src_x.shape
+    img, fg = images.double(), masks.double()
+    out = torch.zeros(t, images.shape[1], h, w, dtype=torch.float64)
+    for ti in range(t):
+        for j in range(h):
+            for q in range(w):
+                num, share = torch.zeros(images.shape[1], dtype=torch.float64), 0.0
+                for si in range(s):
+                    wt = float(maps.weight[si, 0, ti, j, q])
+                    if wt == 0:
+                        continue
+                    x = float(maps.src_x[si, 0, ti, j, q])
+                    y = float(j if maps.src_y is None else maps.src_y[si, 0, ti, j, q])
+                    x0, y0 = math.floor(x), math.floor(y)
+                    for yy, xx in ((y0, x0), (y0, x0 + 1), (y0 + 1, x0), (y0 + 1, x0 + 1)):
+                        tent = (1 - abs(x - xx)) * (1 - abs(y - yy))
+                        if 0 <= xx < w and 0 <= yy < h and tent > 0 and fg[si, yy, xx] > 0:
+                            num += wt * tent * img[si, :, yy, xx]
+                            share += wt * tent
+                if share >= 0.5:
+                    out[ti, :, j, q] = num / share
+    return out.to(images.dtype)
+
+
+@pytest.mark.parametrize("layout", ["row", "image"])
+@pytest.mark.parametrize("n_sources", [1, 2])
+def test_silhouette_aware_weights(dtype: torch.dtype, layout: str, n_sources: int) -> None:
+    """G·C with masks equals NovelViewWarp.apply_maps with masks and a slow loop, in both
+    layouts; no foreground pixel of the result mixes in background."""
+    images, maps = _setup(dtype, 2, n_sources, amplitude=2.5, seed=3)
+    images = images + 0.5  # foreground well above 0: a dark rim would show
+    masks = _blob_masks(n_sources, seed=4)
+    expected = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
+    op = SparseViewOperator.from_maps(images, maps, layout=layout, masks=masks)
+    _assert_close(op.views(), expected, dtype)
+    assert float((expected - _silhouette_loop(images, maps, masks)).abs().max()) <= TOL[dtype]
+    fore = expected.amax(dim=1) > 0
+    assert bool(fore.any()) and bool((expected.amin(dim=1)[fore] >= 0.5 - TOL[dtype]).all())
+    # Without masks the silhouette's pixels mix in the zero background.
+    plain = NovelViewWarp.apply_maps(maps, (images * masks[:, None])[:, None])[0]
+    assert float(plain.amax(dim=1)[plain.amax(dim=1) > 0].min()) < 0.5
+
+
+def test_silhouette_aware_2d_maps(dtype: torch.dtype) -> None:
+    maps = _maps_2d(dtype, 2)
+    images = torch.rand(2, 1, H, W, generator=_generator(6), dtype=torch.float64).to(dtype) + 0.5
+    masks = _blob_masks(2, seed=7)
+    expected = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
+    _assert_close(SparseViewOperator.from_maps(images, maps, masks=masks).views(), expected, dtype)
+    assert float((expected - _silhouette_loop(images, maps, masks)).abs().max()) <= TOL[dtype]
+
+
+def test_silhouette_masks_errors() -> None:
+    images, maps = _setup(torch.float64, 1, 2)
+    with pytest.raises(
+        ValueError, match=r"masks must have shape \(S, H, W\) = \(2, 12, 16\), got \(1, 12, 16\)"
+    ):
+        SparseViewOperator.from_maps(images, maps, masks=torch.ones(1, H, W, dtype=torch.bool))
+    with pytest.raises(TypeError, match="masks must be a tensor, got list"):
+        SparseViewOperator.from_maps(images, maps, masks=[[1.0]])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"masks must have shape \(S, B, H, W\) = \(2, 1, 12, 16\)"):
+        NovelViewWarp.apply_maps(maps, images[:, None], torch.ones(2, H, W))

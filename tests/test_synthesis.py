@@ -205,6 +205,24 @@ def test_per_pair_angles(rendered: tuple[torch.Tensor, list[PairGeometry]]) -> N
     )  # measured 0.0038 vs 0.0068
 
 
+def test_silhouette_aware_synthesis_has_no_dark_rim() -> None:
+    """A rendered object on an exactly black background (the egg: no object pixel below
+    0.09): with ``silhouette=True`` no synthesized pixel mixes object and background, and
+    it is closer to the render; without, the silhouette is a rim of partial values."""
+    obj, camera = make_object("egg"), OrthographicCamera(48)
+    seeds = render_views(obj, [0.0, ALPHA], camera)
+    geometry = [PairGeometry(exact_correspondence(obj, ALPHA, camera), 0.0, 0.0)]
+    thetas = [-8.0, 4.0, 17.0]
+    truth = render_views(obj, thetas, camera)
+    sil = SynthesisOptions(elevation=0.0, extent=False, silhouette=True, background=1e-3)
+    aware = synthesize_views(seeds, ALPHA, thetas, sil, geometry).views
+    plain = synthesize_views(seeds, ALPHA, thetas, PLAIN, geometry).views
+    rim = ((plain > 0) & (plain < 0.05)).sum()
+    assert int(rim) > 20
+    assert int(((aware > 0) & (aware < 0.05)).sum()) == 0
+    assert float((aware - truth).abs().mean()) < float((plain - truth).abs().mean())
+
+
 def test_options_defaults() -> None:
     opts = SynthesisOptions()
     assert (opts.flow, opts.elevation, opts.extent, opts.threshold) == ("tvl1", "auto", True, 1.0)
@@ -219,12 +237,15 @@ def test_options_defaults() -> None:
         (dict(threshold=0.0), "threshold=0.0 must be positive"),
         (dict(threshold=-1.0), "threshold=-1.0 must be positive"),
         (dict(threshold=float("nan")), "threshold=nan must be positive"),
+        (dict(blend="soft"), r"blend must be one of \('linear', 'nearest'\), got 'soft'"),
     ],
-    ids=["flow", "elevation", "threshold-0", "threshold-negative", "threshold-nan"],
+    ids=["flow", "elevation", "threshold-0", "threshold-negative", "threshold-nan", "blend"],
 )
 def test_options_errors(kwargs: dict[str, object], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         SynthesisOptions(**kwargs)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="silhouette must be a bool, got str"):
+        SynthesisOptions(silhouette="yes")  # type: ignore[arg-type]
 
 
 def _seeds(v: int = 2) -> torch.Tensor:

@@ -606,7 +606,45 @@ def test_forward_errors() -> None:
 
 def test_repr() -> None:
     text = repr(NovelViewWarp(12.5, 30.0, elevation=10.0, max_stretch=2.0))
-    assert text == "NovelViewWarp(alpha=12.5, center=30.0, elevation=10.0, max_stretch=2.0)"
+    assert text == "NovelViewWarp(alpha=12.5, center=30.0, elevation=10.0, max_stretch=2.0, blend='linear')"
+
+
+def test_blend_nearest_takes_the_nearer_seed_alone() -> None:
+    """``blend="nearest"``: where both seeds see a pixel, seed 1 up to α/2 and seed 2
+    beyond (weights 0/1); ``"linear"``: 1 − θ/α and θ/α. One-view pixels are alike."""
+    _, _, corr = _small_problem(1, 1, 6, 9, torch.float64, torch.device("cpu"))
+    thetas = [-3.0, 2.0, 5.0, 7.0, 13.0]
+    near = NovelViewWarp(10.0, blend="nearest").maps(corr, thetas)
+    lin = NovelViewWarp(10.0).maps(corr, thetas)
+    both = near.hit[0] & near.hit[1]
+    want_w1 = torch.tensor([1.0, 1.0, 1.0, 0.0, 0.0], dtype=torch.float64).view(1, -1, 1, 1).expand_as(both)
+    assert bool(both.any())
+    torch.testing.assert_close(near.weight[0][both], want_w1[both])
+    lam = (torch.tensor(thetas, dtype=torch.float64) / 10.0).clamp(0, 1).view(1, -1, 1, 1).expand_as(both)
+    torch.testing.assert_close(lin.weight[0][both], (1 - lam)[both])
+    one = near.hit[0] ^ near.hit[1]
+    torch.testing.assert_close(near.weight[0][one], lin.weight[0][one])
+    with pytest.raises(ValueError, match=r"blend must be one of \('linear', 'nearest'\), got 'max'"):
+        NovelViewWarp(10.0, blend="max")
+
+
+def test_forward_with_masks_is_apply_maps_with_masks() -> None:
+    view1, view2, corr = _small_problem(2, 2, 6, 9, torch.float64, torch.device("cpu"))
+    masks = torch.rand(2, 2, 6, 9, generator=torch.Generator().manual_seed(1)) > 0.3
+    warp = NovelViewWarp(10.0)
+    out = warp(view1, view2, correspondence=corr, thetas=[-2.0, 4.0], masks=masks)
+    ref = warp.apply_maps(warp.maps(corr, [-2.0, 4.0]), torch.stack([view1, view2]), masks)
+    torch.testing.assert_close(out, ref)
+    v1, v2, c1 = _small_problem(1, 2, 6, 9, torch.float64, torch.device("cpu"))
+    single = warp(v1[0], v2[0], correspondence=c1, thetas=[4.0], masks=masks[:, 0])
+    batched = warp(v1, v2, correspondence=c1, thetas=[4.0], masks=masks[:, :1])
+    torch.testing.assert_close(single, batched[0])
+    with pytest.raises(
+        ValueError, match=r"masks must have shape \(2, 2, 6, 9\) \(S, \[B,\] H, W\), got \(2, 6, 9\)"
+    ):
+        warp(view1, view2, correspondence=corr, thetas=[4.0], masks=masks[:, 0])
+    with pytest.raises(TypeError, match="masks must be a tensor, got list"):
+        warp(view1, view2, correspondence=corr, thetas=[4.0], masks=[1])
 
 
 def test_thetas_beyond_a_quarter_turn_are_refused() -> None:

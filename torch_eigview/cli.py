@@ -92,6 +92,17 @@ def build_parser() -> argparse.ArgumentParser:
     coil.add_argument(
         "--elevation", type=_elevation, default="auto", help="camera elevation, degrees, or 'auto' (default)"
     )
+    coil.add_argument(
+        "--blend",
+        choices=("linear", "nearest"),
+        default="linear",
+        help="pixels both seeds see: cross-dissolve by angle, or the nearer seed alone",
+    )
+    coil.add_argument(
+        "--silhouette",
+        action="store_true",
+        help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
+    )
     coil.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
@@ -192,7 +203,13 @@ def _run_coil(args: argparse.Namespace) -> int:
         method=args.method,
         objects=args.objects,
         unit_norm=not args.no_unit_norm,
-        synthesis=SynthesisOptions(flow=args.flow, elevation=args.elevation, extent=not args.no_extent),
+        synthesis=SynthesisOptions(
+            flow=args.flow,
+            elevation=args.elevation,
+            extent=not args.no_extent,
+            blend=args.blend,
+            silhouette=args.silhouette,
+        ),
         kernel=args.kernel,
         gamma=args.gamma,
     )

@@ -78,8 +78,22 @@ def _sparse(
     return torch.sparse_coo_tensor(torch.stack([rows, cols]), values, size, check_invariants=False).coalesce()
 
 
-def _gather_coefficients(src_x: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-    """C (S·H·W·W, T) from target→source maps and blend weights, both (S, T, H, W)."""
+def _silhouette_normalize(tent: torch.Tensor, inside: torch.Tensor, fg: torch.Tensor | None) -> torch.Tensor:
+    """Tap weights (S, T, H, W, K) restricted to foreground taps and renormalized per
+    target pixel over all taps of all sources; 0 where the foreground share is below 1/2
+    (``NovelViewWarp.apply_maps`` with ``masks``). ``fg`` (S, T, H, W, K): the tap's mask."""
+    if fg is None:
+        return tent
+    tent = tent * (fg & inside).to(tent.dtype)
+    share = tent.sum(dim=(0, -1), keepdim=True)
+    return torch.where(share >= 0.5, tent / share.clamp_min(0.5), 0.0)
+
+
+def _gather_coefficients(
+    src_x: torch.Tensor, weight: torch.Tensor, masks: torch.Tensor | None = None
+) -> torch.Tensor:
+    """C (S·H·W·W, T) from target→source maps and blend weights, both (S, T, H, W), and
+    optional (S, H, W) seed masks (silhouette-aware weights)."""
     s, t, h, w = src_x.shape
     dev = src_x.device
     use = weight != 0
@@ -94,7 +108,13 @@ def _gather_coefficients(src_x: torch.Tensor, weight: torch.Tensor) -> torch.Ten
     k = torch.stack([k0, k0 + 1], dim=-1)  # (S, T, H, W, 2)
     # Eq. 4 from the target's side: 1 - |x - k| for the two neighbours k of x.
     tent = torch.stack([1 - frac, frac], dim=-1) * weight[..., None]
-    keep = use[..., None] & (k >= 0) & (k <= w - 1) & (tent != 0)
+    inside = (k >= 0) & (k <= w - 1)
+    if masks is not None:
+        row_of = torch.arange(h, device=dev).view(1, 1, h, 1, 1) * w
+        flat = masks.reshape(s, 1, h * w).expand(s, t, h * w)
+        fg = flat.gather(2, (row_of + k.long().clamp(0, w - 1)).reshape(s, t, -1)).view_as(tent) != 0
+        tent = _silhouette_normalize(tent, inside, fg)
+    keep = use[..., None] & inside & (tent != 0)
     block = torch.arange(s, device=dev).view(s, 1, 1, 1, 1) * (h * w * w)
     jl = torch.arange(h * w, device=dev).view(1, 1, h, w, 1)
     rows = block + jl * w + k.long()
@@ -102,8 +122,11 @@ def _gather_coefficients(src_x: torch.Tensor, weight: torch.Tensor) -> torch.Ten
     return _sparse(rows[keep], cols[keep], tent[keep], (s * h * w * w, t))
 
 
-def _gather_coefficients_2d(src_x: torch.Tensor, src_y: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-    """C (S·(H·W)², T) of a 2D warp from maps and blend weights, all (S, T, H, W).
+def _gather_coefficients_2d(
+    src_x: torch.Tensor, src_y: torch.Tensor, weight: torch.Tensor, masks: torch.Tensor | None = None
+) -> torch.Tensor:
+    """C (S·(H·W)², T) of a 2D warp from maps and blend weights, all (S, T, H, W), and
+    optional (S, H, W) seed masks (silhouette-aware weights).
 
     Four bilinear weights per target pixel p at its source position (x, y): rows
     ``(s, p, q)`` for the source pixels q = (y0 + dy, x0 + dx) inside the image.
@@ -123,7 +146,13 @@ def _gather_coefficients_2d(src_x: torch.Tensor, src_y: torch.Tensor, weight: to
     ys = torch.stack([y0, y0, y0 + 1, y0 + 1], dim=-1)
     tent = torch.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], dim=-1)
     tent = tent * weight[..., None]
-    keep = use[..., None] & (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1) & (tent != 0)
+    inside = (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
+    if masks is not None:
+        q = ys.long().clamp(0, h - 1) * w + xs.long().clamp(0, w - 1)
+        flat = masks.reshape(s, 1, n).expand(s, t, n)
+        fg = flat.gather(2, q.reshape(s, t, -1)).view_as(tent) != 0
+        tent = _silhouette_normalize(tent, inside, fg)
+    keep = use[..., None] & inside & (tent != 0)
     block = torch.arange(s, device=dev).view(s, 1, 1, 1, 1) * (n * n)
     p = torch.arange(n, device=dev).view(1, 1, h, w, 1)
     rows = block + p * n + ys.long() * w + xs.long()
@@ -207,7 +236,12 @@ class SparseViewOperator:
 
     @classmethod
     def from_maps(
-        cls, images: torch.Tensor, maps: WarpMaps, mode: str = "gather", layout: str = "auto"
+        cls,
+        images: torch.Tensor,
+        maps: WarpMaps,
+        mode: str = "gather",
+        layout: str = "auto",
+        masks: torch.Tensor | None = None,
     ) -> SparseViewOperator:
         """Builds G·C for one object from the target→source maps of the warp.
 
@@ -222,6 +256,10 @@ class SparseViewOperator:
             layout: ``"row"`` (Eqs. 3–6: a coefficient vector per row, rows must not
                 move), ``"image"`` (Sec. 4: whole-image coefficient vectors, any 2D
                 warp) or ``"auto"``: ``"row"`` unless ``maps.src_y`` moves rows.
+            masks: optional (S, H, W) foreground masks of the seed views: the
+                silhouette-aware weights of ``NovelViewWarp.apply_maps(..., masks)``
+                (foreground taps only, renormalized per target pixel; background where
+                the foreground share is below 1/2).
 
         Returns:
             The operator, with ``views()`` (T, C, H, W) in the dtype of ``images``.
@@ -271,6 +309,12 @@ class SparseViewOperator:
                 "row by row), got rows that move: use layout='image' (Sec. 4's whole-image vectors)"
             )
         use_image = layout == "image" or (layout == "auto" and rows_move)
+        if masks is not None:
+            if not isinstance(masks, torch.Tensor):
+                raise TypeError(f"masks must be a tensor, got {type(masks).__name__}")
+            if masks.shape != (s, h, w):
+                raise ValueError(f"masks must have shape (S, H, W) = {(s, h, w)}, got {tuple(masks.shape)}")
+            masks = masks.detach().to(imgs.device)
         check_finite(weight, "maps.weight")
         check_finite(src_x[weight != 0], "maps.src_x (where maps.weight is non-zero)")
         # The maps are cast to the image dtype first, as NovelViewWarp.apply_maps does.
@@ -278,13 +322,13 @@ class SparseViewOperator:
         weight = weight[:, 0].to(device=imgs.device, dtype=imgs.dtype).detach()
         shape = (imgs.shape[1], h, w)
         if not use_image:
-            return cls(_seed_matrix(imgs.detach()), _gather_coefficients(src_x, weight), shape, t)
+            return cls(_seed_matrix(imgs.detach()), _gather_coefficients(src_x, weight, masks), shape, t)
         if maps.src_y is None:
             src_y = torch.arange(h, dtype=imgs.dtype, device=imgs.device).view(1, 1, h, 1).expand_as(src_x)
         else:
             check_finite(maps.src_y[maps.weight != 0], "maps.src_y (where maps.weight is non-zero)")
             src_y = maps.src_y[:, 0].to(device=imgs.device, dtype=imgs.dtype).detach()
-        c_mat = _gather_coefficients_2d(src_x, src_y, weight)
+        c_mat = _gather_coefficients_2d(src_x, src_y, weight, masks)
         return cls(_image_seed_matrix(imgs.detach(), c_mat), c_mat, shape, t, "image")
 
     @classmethod

@@ -119,6 +119,7 @@ class PerspectiveWarp(NovelViewWarp):
         grow: pixels by which each seed's map is continued beyond what it hits, for the
             target pixels that neither seed hits (the silhouette's last half pixel,
             whose source lies between a foreground and a background seed pixel).
+        blend: ``"linear"`` or ``"nearest"``, as :class:`~torch_eigview.warp.NovelViewWarp`'s.
 
     The correspondences must be 2D: ``vertical_12`` and ``vertical_21`` set (as
     :func:`~torch_eigview.correspondence.estimate_correspondence` returns, or
@@ -136,8 +137,9 @@ class PerspectiveWarp(NovelViewWarp):
         max_stretch: float = 3.0,
         line: str = "perpendicular",
         grow: int = 2,
+        blend: str = "linear",
     ) -> None:
-        super().__init__(alpha, max_stretch=max_stretch)
+        super().__init__(alpha, max_stretch=max_stretch, blend=blend)
         # A CPU float64 constant, not a buffer: the camera geometry is built in float64 on the
         # CPU and moved to the correspondences' device, whatever .to() did to the module.
         self.K = _check_intrinsics(K)
@@ -251,9 +253,7 @@ class PerspectiveWarp(NovelViewWarp):
             correspondence.valid_21,
             (self.alpha, 0.0),
         )
-        lam2 = (
-            (torch.deg2rad(theta) / math.radians(self.alpha)).clamp(0, 1).to(dtype=dtype, device=src1.device)
-        )
+        lam2 = self._share_of_second(torch.deg2rad(theta)).to(dtype=dtype, device=src1.device)
         lam2 = lam2.view(1, -1, 1, 1).expand_as(src1)
 
         def blend(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

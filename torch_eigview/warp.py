@@ -28,7 +28,10 @@ from torch_eigview.cameras import affine_coefficients, orthographic_coefficients
 from torch_eigview.correspondence import Correspondence
 from torch_eigview.errors import as_angle_tensor, check_alpha, check_float_tensor, check_ndim, check_number
 
-__all__ = ["NovelViewWarp", "WarpMaps", "fill_row_holes", "invert_row_map"]
+__all__ = ["BLENDS", "NovelViewWarp", "WarpMaps", "fill_row_holes", "invert_row_map"]
+
+#: How two seed views that both see a target pixel share it (:class:`NovelViewWarp`'s ``blend``).
+BLENDS = ("linear", "nearest")
 
 
 @dataclass(frozen=True)
@@ -281,6 +284,11 @@ class NovelViewWarp(torch.nn.Module):
             With a tilt, points also move vertically (``y = K - sin(elevation) (Z cos(phi)
             - X sin(phi))``) and the maps become 2D; :func:`estimate_elevation` measures
             it from a 2D flow (COIL's camera looks down on the turntable).
+        blend: how two seed views that both see a target pixel share it: ``"linear"``
+            (the default: weights 1 − θ/α and θ/α, a cross-dissolve) or ``"nearest"``
+            (the seed nearer in angle alone, seed 1 up to α/2: Eq. 3's form, one image
+            sampled per pixel; sharper, as nothing is averaged across the two warps).
+            Where only one seed sees a pixel it is used alone either way.
         camera: optional affine camera of the first seed view, (2, 3), (2, 4) ``[M | t]``
             or (3, 4) (Sec. 4's affine camera): a and b are then solved from it by
             :func:`~torch_eigview.cameras.affine_coefficients` (which refuses a camera
@@ -303,9 +311,13 @@ class NovelViewWarp(torch.nn.Module):
         depth_sign: float | str = "auto",
         elevation: float = 0.0,
         camera: torch.Tensor | None = None,
+        blend: str = "linear",
     ) -> None:
         super().__init__()
         self.alpha = check_alpha(alpha)
+        if blend not in BLENDS:
+            raise ValueError(f"blend must be one of {BLENDS}, got {blend!r}")
+        self.blend = blend
         self.center = None if center is None else check_number(center, "center")
         if not math.isfinite(self.center or 0.0):
             raise ValueError(f"center={center} must be a finite column")
@@ -332,7 +344,8 @@ class NovelViewWarp(torch.nn.Module):
     def extra_repr(self) -> str:
         return (
             f"alpha={self.alpha}, center={self.center}, elevation={self.elevation}, "
-            f"max_stretch={self.max_stretch}" + ("" if self.camera is None else ", camera=affine")
+            f"max_stretch={self.max_stretch}, blend={self.blend!r}"
+            + ("" if self.camera is None else ", camera=affine")
         )
 
     def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
@@ -380,13 +393,18 @@ class NovelViewWarp(torch.nn.Module):
         )
         # Where both views see a pixel the nearer one in angle weighs more; where one is
         # occluded the other is used alone; where neither sees it, the angular weights.
-        lam2 = (th / math.radians(self.alpha)).clamp(0, 1)
+        lam2 = self._share_of_second(th)
         both, neither = hit1 & hit2, ~hit1 & ~hit2
         w1 = torch.where(both | neither, (1 - lam2).expand_as(src1), hit1.to(dtype))
         src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
         return WarpMaps(
             torch.stack([src1, src2]), torch.stack([w1, 1 - w1]), torch.stack([hit1, hit2]), theta, src_y
         )
+
+    def _share_of_second(self, theta_rad: torch.Tensor) -> torch.Tensor:
+        """The second seed's weight where both seeds see a pixel (``blend``), per angle."""
+        lam2 = (theta_rad / math.radians(self.alpha)).clamp(0, 1)
+        return lam2 if self.blend == "linear" else (lam2 > 0.5).to(lam2.dtype)
 
     @property
     def _tilt(self) -> float:
@@ -404,27 +422,46 @@ class NovelViewWarp(torch.nn.Module):
         return torch.where(mean_z >= 0, 1.0, -1.0).to(xa.dtype).view(-1, 1, 1, 1)
 
     @staticmethod
-    def apply_maps(maps: WarpMaps, views: torch.Tensor) -> torch.Tensor:
+    def apply_maps(maps: WarpMaps, views: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
         """Samples and blends the seed views with precomputed maps.
 
         Args:
             maps: :class:`WarpMaps` with S sources for B objects and T angles.
             views: (S, B, C, H, W) seed images.
+            masks: optional (S, B, H, W) foreground masks of the seed views (bool or 0/1):
+                *silhouette-aware* sampling. Each target pixel's bilinear taps, over both
+                seeds and with the blend weights, then count foreground source pixels
+                only and are renormalized to sum to 1; a target pixel whose foreground
+                share is below 1/2 is background (0). Without it a pixel on the
+                silhouette mixes object and background (a dark rim); with it the result
+                is still linear in ``views`` for fixed masks (the weights of
+                :meth:`SparseViewOperator.from_maps` with ``masks``).
 
         Returns:
             (B, T, C, H, W) synthesized views.
         """
         s, b, t, h, w = maps.src_x.shape
         c = views.shape[2]
+        if masks is not None:
+            if masks.shape != (s, b, h, w):
+                raise ValueError(
+                    f"masks must have shape (S, B, H, W) = {(s, b, h, w)}, got {tuple(masks.shape)}"
+                )
+            m = masks.to(views.dtype)[:, :, None]
+            views = torch.cat([views * m, m], dim=2)  # the mask rides along: one warp for both
         rows = torch.arange(h, dtype=views.dtype, device=views.device).view(1, h, 1).expand(b * t, h, w)
-        out = views.new_zeros(b, t, c, h, w)
+        ch = views.shape[2]
+        out = views.new_zeros(b, t, ch, h, w)
         for i in range(s):
-            img = views[i][:, None].expand(b, t, c, h, w).reshape(b * t, c, h, w)
+            img = views[i][:, None].expand(b, t, ch, h, w).reshape(b * t, ch, h, w)
             map_x = maps.src_x[i].reshape(b * t, h, w).to(views.dtype)
             map_y = rows if maps.src_y is None else maps.src_y[i].reshape(b * t, h, w).to(views.dtype)
             warped = remap(img, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
-            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped.view(b, t, c, h, w)
-        return out
+            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped.view(b, t, ch, h, w)
+        if masks is None:
+            return out
+        share = out[:, :, c:]
+        return torch.where(share >= 0.5, out[:, :, :c] / share.clamp_min(0.5), 0.0)
 
     def forward(
         self,
@@ -433,6 +470,7 @@ class NovelViewWarp(torch.nn.Module):
         *,
         correspondence: Correspondence,
         thetas: object,
+        masks: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Synthesizes the novel views.
 
@@ -441,6 +479,9 @@ class NovelViewWarp(torch.nn.Module):
             view2: same shape, second seed view (angle ``alpha``), or None to warp view 1 alone.
             correspondence: (B, H, W) correspondences between the seed views.
             thetas: (T,) novel angles in degrees.
+            masks: optional foreground masks of the seed views, (S, B, H, W) (or (S, H, W)
+                unbatched; S = 1 or 2 as views are given): silhouette-aware sampling, see
+                :meth:`apply_maps`.
 
         Returns:
             (B, T, C, H, W) views (or (T, C, H, W) for unbatched input); differentiable
@@ -467,5 +508,12 @@ class NovelViewWarp(torch.nn.Module):
             )
         corr = correspondence.to(device=v1.device)
         maps = self.maps(corr, thetas, n_sources=len(views))
-        out = self.apply_maps(maps, torch.stack(views))
+        if masks is not None:
+            if not isinstance(masks, torch.Tensor):
+                raise TypeError(f"masks must be a tensor, got {type(masks).__name__}")
+            expected = (len(views), h, w) if unbatched else (len(views), b, h, w)
+            if masks.shape != expected:
+                raise ValueError(f"masks must have shape {expected} (S, [B,] H, W), got {tuple(masks.shape)}")
+            masks = (masks[:, None] if unbatched else masks).to(v1.device)
+        out = self.apply_maps(maps, torch.stack(views), masks)
         return out[0] if unbatched else out
