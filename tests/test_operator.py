@@ -512,6 +512,16 @@ def test_silhouette_aware_2d_maps(dtype: torch.dtype) -> None:
     assert float((expected - _silhouette_loop(images, maps, masks)).abs().max()) <= TOL[dtype]
 
 
+def test_silhouette_masks_any_dtype() -> None:
+    """Non-zero is foreground in both paths, whatever the masks' dtype (0/255 uint8, 0/0.4 float)."""
+    images, maps = _setup(torch.float64, 1, 2, seed=8)
+    masks = _blob_masks(2, seed=9)
+    ref = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
+    for m in (masks.to(torch.uint8) * 255, masks.double() * 0.4):
+        torch.testing.assert_close(NovelViewWarp.apply_maps(maps, images[:, None], m[:, None])[0], ref)
+        torch.testing.assert_close(SparseViewOperator.from_maps(images, maps, masks=m).views(), ref)
+
+
 def test_silhouette_masks_errors() -> None:
     images, maps = _setup(torch.float64, 1, 2)
     with pytest.raises(

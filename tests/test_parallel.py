@@ -73,5 +73,25 @@ def test_bad_object_type() -> None:
         next(synthesize_objects([[1.0, 2.0]], 5.0, THETAS, workers=1))  # type: ignore[list-item]
 
 
+def test_bad_arguments_raise_before_any_process() -> None:
+    with pytest.raises(ValueError, match="thetas must be finite"):
+        next(synthesize_objects(seeds_of(1), 5.0, [1.0, float("nan")], workers=2))
+    with pytest.raises(ValueError, match="at least 2 views"):
+        next(synthesize_objects([seeds_of(1)[0][:1]], 5.0, THETAS, workers=2))
+    with pytest.raises(TypeError, match="options must be a SynthesisOptions or None, got dict"):
+        next(synthesize_objects(seeds_of(1), 5.0, THETAS, {"flow": "ilk"}, workers=2))  # type: ignore[arg-type]
+    assert list(synthesize_objects([], 5.0, THETAS, workers=2)) == []
+
+
+def test_shared_memory_stays_with_the_pool() -> None:
+    """Seeds are copied before they are sent (sending moves a storage into shared memory,
+    the caller's whole tensor with it) and results are copied out of it."""
+    big = torch.cat(seeds_of(3))  # (6, 3, 32, 32); the objects are views of it
+    objects = [big[2 * i : 2 * i + 2] for i in range(3)]
+    out = list(synthesize_objects(objects, 5.0, THETAS, workers=1))
+    assert not big.is_shared()
+    assert not any(o.views.is_shared() for o in out)
+
+
 def test_available_cpus() -> None:
     assert available_cpus() >= 1

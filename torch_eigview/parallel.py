@@ -16,6 +16,8 @@ as for any ``multiprocessing`` code. ``workers=0`` runs everything in this proce
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import os
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
@@ -24,7 +26,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 import torch
 import torch.multiprocessing as mp
 
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
+from torch_eigview.errors import as_angle_tensor
+from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, _check_seeds, synthesize_views
 
 __all__ = ["available_cpus", "synthesize_objects"]
 
@@ -78,11 +81,15 @@ def synthesize_objects(
 
     Yields:
         One :class:`~torch_eigview.synthesis.SynthesizedViews` per object, in the order
-        of ``objects``, identical to :func:`~torch_eigview.synthesis.synthesize_views`'s.
+        of ``objects``, identical to :func:`~torch_eigview.synthesis.synthesize_views`'s
+        (with ``workers > 0`` on the CPU, whatever the seeds' device: the workers run
+        on the CPU).
 
     Raises:
-        TypeError / ValueError: a bad ``workers``; any error of ``synthesize_views`` for
-            an object, raised here when that object's turn comes (the pool is shut down).
+        TypeError / ValueError: a bad ``workers``, ``thetas`` or ``options``, or a first
+            object or ``alpha`` that ``synthesize_views`` refuses (before any process
+            starts); any later object's error when that object's turn comes (the pool
+            is shut down).
 
     Example:
         >>> from torch_eigview.bench import smooth_views
@@ -91,24 +98,47 @@ def synthesize_objects(
         [3, 3, 3]
     """
     workers = _check_workers(workers)
-    angles = thetas.detach().reshape(-1).tolist() if isinstance(thetas, torch.Tensor) else thetas
+    if options is not None and not isinstance(options, SynthesisOptions):
+        raise TypeError(f"options must be a SynthesisOptions or None, got {type(options).__name__}")
+    angles = as_angle_tensor(thetas, "thetas").tolist()  # checked here, not in a worker
+    it = iter(objects)
     if workers == 0:
-        for seeds in objects:
-            yield synthesize_views(seeds, alpha, angles, options)
+        for seeds in it:
+            yield synthesize_views(_as_seeds(seeds), alpha, angles, options)
         return
-    if not isinstance(angles, list):
-        angles = list(angles)  # type: ignore[call-overload]
+    first = next(it, None)
+    if first is None:
+        return
+    # The first object is checked here, before any process starts (its alpha too).
+    _check_seeds(_as_seeds(first), alpha)
     context = mp.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker)
     pending: deque[Future[SynthesizedViews]] = deque()
+
+    def collect() -> SynthesizedViews:
+        out = pending.popleft().result()
+        # Out of the shared-memory segment it came in (a /dev/shm file per object otherwise,
+        # for as long as the caller keeps the views).
+        return dataclasses.replace(out, views=out.views.clone())
+
     try:
-        for seeds in objects:
-            if not isinstance(seeds, torch.Tensor):
-                raise TypeError(f"objects must yield (V, C, H, W) tensors, got {type(seeds).__name__}")
-            pending.append(pool.submit(_synthesize, seeds.detach().cpu(), alpha, angles, options))
+        for seeds in itertools.chain([first], it):
+            # A copy: sending a tensor moves its whole storage into shared memory, and the
+            # caller's tensor (or the larger tensor it is a view of) with it.
+            pending.append(
+                pool.submit(
+                    _synthesize, _as_seeds(seeds).detach().to("cpu", copy=True), alpha, angles, options
+                )
+            )
             if len(pending) >= 2 * workers:
-                yield pending.popleft().result()
+                yield collect()
         while pending:
-            yield pending.popleft().result()
+            yield collect()
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _as_seeds(seeds: object) -> torch.Tensor:
+    if not isinstance(seeds, torch.Tensor):
+        raise TypeError(f"objects must yield (V, C, H, W) tensors, got {type(seeds).__name__}")
+    return seeds

@@ -155,7 +155,10 @@ class PerspectiveWarp(NovelViewWarp):
         self.grow = grow
 
     def extra_repr(self) -> str:
-        return f"alpha={self.alpha}, distance={self.distance}, max_stretch={self.max_stretch}, line={self.line!r}"
+        return (
+            f"alpha={self.alpha}, distance={self.distance}, max_stretch={self.max_stretch}, "
+            f"line={self.line!r}, blend={self.blend!r}"
+        )
 
     def _source(
         self,

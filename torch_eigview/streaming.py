@@ -118,7 +118,8 @@ class _Stream:
         if not bool(torch.isfinite(x).all()):
             raise ValueError(
                 f"{self.name} gave non-finite values on a later pass ({what} came out non-finite) although the "
-                "first pass was finite: a source must yield the same views on every call"
+                "first pass was finite: either the source did not yield the same views on every call (it "
+                "must), or the sums overflowed the blocks' dtype (values too large: rescale the views)"
             )
 
     @property

@@ -72,7 +72,11 @@ class SynthesisOptions:
         silhouette: silhouette-aware sampling: only the seeds' foreground pixels
             (``background``) enter a synthesized pixel, renormalized, and a pixel less
             than half covered by them is background (``NovelViewWarp.apply_maps`` with
-            ``masks``); off, a silhouette pixel mixes object and background.
+            ``masks``); off, a silhouette pixel mixes object and background. The mask is
+            a brightness threshold: object pixels darker than ``background`` count as
+            background too (they come out 0 or take their bright neighbours' values), so
+            use it where the background is darker than every object pixel (the
+            synthetic renders: exactly 0).
     """
 
     flow: str = "tvl1"

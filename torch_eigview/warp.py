@@ -71,7 +71,7 @@ def invert_row_map(
     the target row; every integer target column it covers takes the linearly inverted
     source column. Segments whose order flips are surface turned away from the novel
     camera; where segments overlap the one nearest the camera (largest ``depth``) wins,
-    like a z-buffer.
+    like a z-buffer. A segment with a non-finite end (map or depth) is left out.
 
     Args:
         dst_x_for_src: (B, T, H, W) forward map x3(x1) in pixels.
@@ -92,8 +92,13 @@ def invert_row_map(
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
     if w < 2 or not bool(seg_ok.any()):
         return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
-    first = torch.ceil(f0)
-    room = torch.where(seg_ok, f1 - first, -1.0)  # slot m (target column first + m) exists iff m <= room
+    seg_ok &= torch.isfinite(f0) & torch.isfinite(f1)  # a non-finite end: no surface
+    if depth is not None:
+        seg_ok &= torch.isfinite(depth[..., :-1]) & torch.isfinite(depth[..., 1:])
+    # Target columns of a segment: the integers in [f0, f1] inside the image, from col0 on;
+    # slot m is column col0 + m and exists iff m <= room (at most W slots, whatever the span).
+    col0 = torch.ceil(f0).clamp(min=0)
+    room = torch.where(seg_ok, torch.floor(f1).clamp(max=w - 1) - col0, -1.0)
 
     def interpolate(
         frac: torch.Tensor, lo: torch.Tensor, d0: torch.Tensor | None, d1: torch.Tensor | None
@@ -105,24 +110,22 @@ def invert_row_map(
     # Slot 0, every segment at once (most segments cover at most one column: views
     # foreshorten). Entries that are no target column go to a spare slot n with key -inf.
     lo_col = torch.arange(w - 1, dtype=dtype, device=device)
-    ok0 = (room >= 0) & (first >= 0) & (first <= w - 1)
-    frac0 = (first - f0) / length
+    ok0 = room >= 0
+    frac0 = (col0 - f0) / length
     d0 = None if depth is None else depth[..., :-1]
     d1 = None if depth is None else depth[..., 1:]
     src0, key0 = interpolate(frac0, lo_col, d0, d1)
     row0 = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
-    idx0 = torch.where(ok0, row0 + first.clamp(0, w - 1).long(), n).reshape(-1)
+    idx0 = torch.where(ok0, row0 + col0.clamp(max=w - 1).long(), n).reshape(-1)
     key0 = torch.where(ok0, key0, -math.inf).reshape(-1)
     src0 = src0.reshape(-1)
     # Slots m >= 1: only the few segments longer than a pixel, gathered.
-    room_flat, first_flat = room.reshape(-1), first.reshape(-1)
+    room_flat, col0_flat = room.reshape(-1), col0.reshape(-1)
     idx_parts, key_parts, src_parts = [idx0], [key0], [src0]
     cand = (room_flat >= 1).nonzero().squeeze(1)
     m = 1
     while cand.numel():
-        col_m = first_flat.index_select(0, cand) + m
-        keep = (col_m >= 0) & (col_m <= w - 1)
-        seg, col = cand[keep], col_m[keep]
+        seg, col = cand, col0_flat.index_select(0, cand) + m
         frac = (col - f0.reshape(-1).index_select(0, seg)) / length.reshape(-1).index_select(0, seg)
         lo = (seg % (w - 1)).to(dtype)
         dd0 = None if d0 is None else d0.reshape(-1).index_select(0, seg)
@@ -180,11 +183,15 @@ def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
     grid = fields.new_empty(b, t, h, w, 2)  # written in place on every call
 
     def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
-        torch.mul(x, sx, out=grid[..., 0]).sub_(1)
-        torch.mul(y, sy, out=grid[..., 1]).sub_(1)
+        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad):
+            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)  # out= does not differentiate
+        else:
+            torch.mul(x, sx, out=grid[..., 0]).sub_(1)
+            torch.mul(y, sy, out=grid[..., 1]).sub_(1)
+            g = grid
         src = flat if n_fields == f else flat[:, :n_fields]
         out = F.grid_sample(
-            src, grid.view(b * t, h, w, 2), mode="bilinear", padding_mode="border", align_corners=True
+            src, g.view(b * t, h, w, 2), mode="bilinear", padding_mode="border", align_corners=True
         )
         return out.view(b, t, n_fields, h, w)
 
@@ -428,14 +435,17 @@ class NovelViewWarp(torch.nn.Module):
         Args:
             maps: :class:`WarpMaps` with S sources for B objects and T angles.
             views: (S, B, C, H, W) seed images.
-            masks: optional (S, B, H, W) foreground masks of the seed views (bool or 0/1):
+            masks: optional (S, B, H, W) foreground masks of the seed views (non-zero is
+                foreground, any dtype):
                 *silhouette-aware* sampling. Each target pixel's bilinear taps, over both
                 seeds and with the blend weights, then count foreground source pixels
                 only and are renormalized to sum to 1; a target pixel whose foreground
                 share is below 1/2 is background (0). Without it a pixel on the
                 silhouette mixes object and background (a dark rim); with it the result
                 is still linear in ``views`` for fixed masks (the weights of
-                :meth:`SparseViewOperator.from_maps` with ``masks``).
+                :meth:`SparseViewOperator.from_maps` with ``masks``; the two round the
+                foreground share differently, so a pixel within float rounding of 1/2
+                can fall on different sides of it).
 
         Returns:
             (B, T, C, H, W) synthesized views.
@@ -447,7 +457,7 @@ class NovelViewWarp(torch.nn.Module):
                 raise ValueError(
                     f"masks must have shape (S, B, H, W) = {(s, b, h, w)}, got {tuple(masks.shape)}"
                 )
-            m = masks.to(views.dtype)[:, :, None]
+            m = (masks.to(views.device) != 0).to(views.dtype)[:, :, None]
             views = torch.cat([views * m, m], dim=2)  # the mask rides along: one warp for both
         rows = torch.arange(h, dtype=views.dtype, device=views.device).view(1, h, 1).expand(b * t, h, w)
         ch = views.shape[2]
@@ -506,8 +516,6 @@ class NovelViewWarp(torch.nn.Module):
                 f"correspondence must have shape (B, H, W) = {(b, h, w)} to match the views, "
                 f"got {correspondence.shape}"
             )
-        corr = correspondence.to(device=v1.device)
-        maps = self.maps(corr, thetas, n_sources=len(views))
         if masks is not None:
             if not isinstance(masks, torch.Tensor):
                 raise TypeError(f"masks must be a tensor, got {type(masks).__name__}")
@@ -515,5 +523,7 @@ class NovelViewWarp(torch.nn.Module):
             if masks.shape != expected:
                 raise ValueError(f"masks must have shape {expected} (S, [B,] H, W), got {tuple(masks.shape)}")
             masks = (masks[:, None] if unbatched else masks).to(v1.device)
+        corr = correspondence.to(device=v1.device)
+        maps = self.maps(corr, thetas, n_sources=len(views))
         out = self.apply_maps(maps, torch.stack(views), masks)
         return out[0] if unbatched else out
