@@ -127,13 +127,16 @@ def _is_plain_orthographic(camera: AffineCamera | PerspectiveCamera) -> bool:
     return bool(torch.equal(camera.P, ortho.P))
 
 
-def camera_warp(camera: AffineCamera | PerspectiveCamera, alpha: float) -> NovelViewWarp:
-    """The warp of a camera model: Eq. 7 (orthographic), Sec. 4's affine solve or trifocal transfer."""
+def camera_warp(
+    camera: AffineCamera | PerspectiveCamera, alpha: float, blend: str = "linear"
+) -> NovelViewWarp:
+    """The warp of a camera model: Eq. 7 (orthographic), Sec. 4's affine solve or trifocal
+    transfer; ``blend`` as :class:`~torch_eigview.warp.NovelViewWarp`'s."""
     if isinstance(camera, PerspectiveCamera):
-        return PerspectiveWarp(alpha, camera._k, camera.distance)
+        return PerspectiveWarp(alpha, camera._k, camera.distance, blend=blend)
     if _is_plain_orthographic(camera):
-        return NovelViewWarp(alpha)
-    return NovelViewWarp(alpha, camera=camera.P)
+        return NovelViewWarp(alpha, blend=blend)
+    return NovelViewWarp(alpha, camera=camera.P, blend=blend)
 
 
 def _pair_correspondence(
@@ -162,7 +165,7 @@ def _camera_gallery(
 ) -> torch.Tensor:
     """Views at ``thetas`` for an affine or perspective camera, each angle from the seed
     pair :func:`~torch_eigview.synthesis.pair_of` routes it to."""
-    warp = camera_warp(scene.camera, alpha)
+    warp = camera_warp(scene.camera, alpha, SYNTHETIC_OPTIONS.blend)
     rel = torch.tensor(thetas, dtype=torch.float64) - first
     pair = pair_of(rel, alpha, n_views)
     out: list[torch.Tensor | None] = [None] * len(thetas)
