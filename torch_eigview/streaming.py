@@ -293,19 +293,17 @@ class StreamingEigenspace(Eigenspace):
             hi += rows
         panels.append((lo, hi))
         for lo, hi in panels:
-            held: list[torch.Tensor] = []
-            panel: torch.Tensor | None = None
+            # The panel's blocks are centred straight into one buffer (no list + cat, which
+            # held the panel twice at its peak).
+            panel = torch.empty(hi - lo, mean.numel(), dtype=mean.dtype, device=mean.device)
             start = 0
             for b in stream:
                 stop = start + b.shape[0]
                 if lo <= start < hi:
-                    held.append(b - mean)
+                    torch.sub(b, mean, out=panel[start - lo : stop - lo])
                     if stop == hi:
-                        panel = torch.cat(held) if len(held) > 1 else held[0]
-                        held = []
                         gram[lo:hi, lo:hi] = _gram(panel).double()
                 elif start >= hi:
-                    assert panel is not None
                     cross = (panel @ (b - mean).T).double()
                     gram[lo:hi, start:stop] = cross
                     gram[start:stop, lo:hi] = cross.T
