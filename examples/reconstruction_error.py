@@ -7,7 +7,7 @@ for the true set of views. For N ∈ {4, 6, 8, 12, 16, 24} equally spaced of the
 - ``interpolated``: the eigenspace of those N views and 25·48/N views synthesized
   between every consecutive pair (each pair is a seed pair of its own, with TV-L1 flow
   correspondences; ``interp-exact`` takes the renderer's exact correspondences), with the
-  synthetic protocol's options (``demo.SYNTHETIC_OPTIONS``: silhouette-aware sampling
+  synthetic protocol's options (``synthetic_scene.SYNTHETIC_OPTIONS``: silhouette-aware sampling
   against the renders' black background, so that no synthesized silhouette pixel mixes
   object and background).
 
@@ -29,10 +29,10 @@ import time
 
 import torch
 
-from torch_eigview.demo import SYNTHETIC_OPTIONS
 from torch_eigview.eigenspace import Eigenspace
 from torch_eigview.synthesis import PairGeometry, synthesize_views
 from torch_eigview.synthetic import OrthographicCamera, exact_correspondence, make_object, render
+from torch_eigview.synthetic_scene import SYNTHETIC_OPTIONS
 
 H, W, N_TRUE = 70, 60, 48
 SUBSETS = (4, 6, 8, 12, 16, 24)

@@ -10,7 +10,7 @@ import torch
 from helpers import rand
 
 from torch_eigview.raster import invert_map_2d
-from torch_eigview.warp import invert_row_map
+from torch_eigview.row_maps import invert_row_map
 
 
 def _grid(h: int, w: int, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:

@@ -76,7 +76,7 @@ def test_bad_input() -> None:
 
 def test_bench_pipeline_case_runs() -> None:
     """The benchmark's whole-build case (flow + synthesis into the cache, exact Gram from it)."""
-    from torch_eigview.bench import _worker
+    from torch_eigview.bench_scaling import _worker
 
     row = _worker({"kind": "pipeline", "objects": 3, "size": 32, "channels": 3, "k": 3, "max_views": 41})
     assert row["passes"] > 1 and 0 < row["synthesis_s"] <= row["seconds"]

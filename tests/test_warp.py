@@ -11,7 +11,8 @@ from helpers import check_module, rand
 
 from torch_eigview.cameras import estimate_elevation, orthographic_coefficients
 from torch_eigview.correspondence import Correspondence, correspondence_from_disparity
-from torch_eigview.warp import NovelViewWarp, WarpMaps, fill_row_holes, invert_row_map
+from torch_eigview.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.warp import NovelViewWarp, WarpMaps
 
 # --- an analytic scene: a textured vertical cylinder on the rotation axis --------------
 #

@@ -20,6 +20,7 @@ import torch
 from skimage.registration import optical_flow_ilk, optical_flow_tvl1
 
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
+from torch_eigview.row_maps import fill_row_holes, invert_row_map
 
 __all__ = ["Correspondence", "correspondence_from_disparity", "estimate_correspondence"]
 
@@ -130,7 +131,6 @@ def correspondence_from_disparity(
 
 def _invert_disparity(d12: torch.Tensor) -> torch.Tensor:
     """Reverse disparity by inverting x2(x1) = x1 + d12 along each row (nearest monotone piece)."""
-    from torch_eigview.warp import fill_row_holes, invert_row_map  # warp imports this module
 
     w = d12.shape[-1]
     cols = torch.arange(w, dtype=d12.dtype, device=d12.device)

@@ -45,12 +45,6 @@ def _init_worker() -> None:
     torch.set_num_threads(1)
 
 
-def _synthesize(
-    seeds: torch.Tensor, alpha: float | Sequence[float], thetas: list[float], options: SynthesisOptions | None
-) -> SynthesizedViews:
-    return synthesize_views(seeds, alpha, thetas, options)
-
-
 def _check_workers(workers: int) -> int:
     if isinstance(workers, bool) or not isinstance(workers, int):
         raise TypeError(f"workers must be an int, got {type(workers).__name__} {workers!r}")
@@ -127,7 +121,7 @@ def synthesize_objects(
             # caller's tensor (or the larger tensor it is a view of) with it.
             pending.append(
                 pool.submit(
-                    _synthesize, _as_seeds(seeds).detach().to("cpu", copy=True), alpha, angles, options
+                    synthesize_views, _as_seeds(seeds).detach().to("cpu", copy=True), alpha, angles, options
                 )
             )
             if len(pending) >= 2 * workers:

@@ -13,7 +13,7 @@ Convention:
 
     Both wind positively, ``(b - a) x (c - a) > 0`` with ``u x v = u_x v_y - u_y v_x``; a
     triangle whose forward image winds the other way is folded (surface turned away from
-    the novel camera), like a segment of :func:`~torch_eigview.warp.invert_row_map` whose
+    the novel camera), like a segment of :func:`~torch_eigview.row_maps.invert_row_map` whose
     order flips. Depth grows towards the novel camera: where triangles overlap, the one
     with the largest interpolated depth wins.
 """
@@ -203,7 +203,7 @@ def invert_map_2d(
     up to about ``tol`` pixels outside it.
 
     Where triangles overlap the largest depth wins (``scatter_reduce_`` "amax", as in
-    :func:`~torch_eigview.warp.invert_row_map`). Without ``depth`` the key is the source
+    :func:`~torch_eigview.row_maps.invert_row_map`). Without ``depth`` the key is the source
     position in raster order, ``src_y * W + src_x`` (for a row map: the largest source
     column, as ``invert_row_map``). Equal keys go to the later triangle in the order
     (b, t, j, l, upper before lower).

@@ -299,11 +299,12 @@ def synthesize_views(
         )
         maps = warp.maps(geo.correspondence, theta[sel] - starts[n])
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
-        masks = foreground_mask(pair_seeds, opts.background) if opts.silhouette else None
-        if opts.extent:
+        fg = foreground_mask(pair_seeds, opts.background) if opts.extent or opts.silhouette else None
+        masks = fg if opts.silhouette else None
+        if fg is not None and opts.extent:
             # The foreground mask rides along as one more channel: one warp for both.
-            fg = foreground_mask(pair_seeds, opts.background).to(seeds.dtype)[:, :, None]
-            warped = warp.apply_maps(maps, torch.cat([pair_seeds, fg], dim=2), masks)[0]
+            channel = fg.to(seeds.dtype)[:, :, None]
+            warped = warp.apply_maps(maps, torch.cat([pair_seeds, channel], dim=2), masks)[0]
             views = normalize_extent(warped[:, :-1], warped[:, -1] > 0.5)
         else:
             views = warp.apply_maps(maps, pair_seeds, masks)[0]
