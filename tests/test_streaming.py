@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 import torch
 
@@ -44,6 +46,21 @@ def test_exact_equals_eigenspace(shape: tuple[int, int], max_views: int, dtype: 
         space.explained_variance_ratio_, ref.explained_variance_ratio_, rtol=1e-5, atol=0
     )
     assert space.components_.dtype == dtype and space.n_samples_ == shape[0]
+
+
+@pytest.mark.parametrize("max_views", [100, 300])
+def test_exact_gram_chunks_uneven_blocks(max_views: int) -> None:
+    """Later blocks are gathered into chunks of up to 256 views for the panel products: blocks
+    that fill a chunk exactly, overflow it, or are larger than one (a chunk is reallocated)."""
+    x = make_views(700, 900, seed=3)
+    sizes = [7, 41, 41, 300, 1, 41, 129, 140]
+    sizes.append(700 - sum(sizes))
+    edges = torch.tensor([0, *sizes]).cumsum(0).tolist()
+    blocks = [x[lo:hi] for lo, hi in itertools.pairwise(edges)]
+    ref = Eigenspace(10).fit(x)
+    space = StreamingEigenspace(10, max_views=max_views).fit(blocks)
+    torch.testing.assert_close(space.components_, ref.components_, atol=1e-10, rtol=0)
+    torch.testing.assert_close(space.eigenvalues_, ref.eigenvalues_, rtol=1e-10, atol=0)
 
 
 def test_gram_passes_follow_panels() -> None:
@@ -127,6 +144,13 @@ def test_bad_blocks() -> None:
     bad[12, 3] = float("nan")
     with pytest.raises(ValueError, match="must be finite"):
         StreamingEigenspace(4).fit(blocks_of(bad, 10))
+    # The error names the source's block (empty blocks count), found from its column sums.
+    with pytest.raises(ValueError, match=r"blocks\[2\] must be finite, got 1 NaN"):
+        StreamingEigenspace(4).fit([bad[:10], bad[:0], bad[10:20], bad[20:]])
+    huge = x.clone()
+    huge[3:5, 0] = 1e308  # finite, but the float64 sums overflow
+    with pytest.raises(ValueError, match=r"blocks\[0\] is too large"):
+        StreamingEigenspace(4).fit(blocks_of(huge, 10))
     with pytest.raises(ValueError, match="at least 2 views"):
         StreamingEigenspace(1).fit([x[:1]])
     with pytest.raises(TypeError, match="callable"):
