@@ -50,9 +50,10 @@ def invert_row_map(
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
     if w < 2 or not bool(seg_ok.any()):
         return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
-    seg_ok &= torch.isfinite(f0) & torch.isfinite(f1)  # a non-finite end: no surface
+    finite = torch.isfinite(dst_x_for_src)  # a non-finite end (map or depth): no surface
     if depth is not None:
-        seg_ok &= torch.isfinite(depth[..., :-1]) & torch.isfinite(depth[..., 1:])
+        finite &= torch.isfinite(depth)
+    seg_ok &= finite[..., :-1] & finite[..., 1:]
     # Target columns of a segment: the integers in [f0, f1] inside the image, from col0 on;
     # slot m is column col0 + m and exists iff m <= room (at most W slots, whatever the span).
     col0 = torch.ceil(f0).clamp(min=0)
