@@ -48,11 +48,12 @@ def test_exact_equals_eigenspace(shape: tuple[int, int], max_views: int, dtype: 
     assert space.components_.dtype == dtype and space.n_samples_ == shape[0]
 
 
-@pytest.mark.parametrize("max_views", [100, 300])
-def test_exact_gram_chunks_uneven_blocks(max_views: int) -> None:
-    """Later blocks are gathered into chunks of up to 256 views for the panel products: blocks
-    that fill a chunk exactly, overflow it, or are larger than one (a chunk is reallocated)."""
-    x = make_views(700, 900, seed=3)
+@pytest.mark.parametrize(("n_features", "max_views"), [(900, 100), (900, 300), (60, 4096)])
+def test_exact_chunks_uneven_blocks(n_features: int, max_views: int) -> None:
+    """Blocks are gathered into chunks for the products (Gram path: later blocks against a
+    panel, up to 256 views; scatter path, N = 60: up to N/2 views): blocks that fill a chunk
+    exactly, overflow it, or are larger than one (the chunk is reallocated)."""
+    x = make_views(700, n_features, seed=3)
     sizes = [7, 41, 41, 300, 1, 41, 129, 140]
     sizes.append(700 - sum(sizes))
     edges = torch.tensor([0, *sizes]).cumsum(0).tolist()

@@ -90,7 +90,7 @@ class ViewCache:
         check_finite(stored, f"views (as {self.dtype})")  # after the cast: float16 overflows above 65504
         data = stored.numpy()
         with open(self.path, "ab") as fh:
-            fh.write(memoryview(data.reshape(-1)))  # the tensor's own buffer, no copy
+            fh.write(data.reshape(-1).data)  # the tensor's own buffer, no copy
         self._blocks.append((self._end, tuple(v.shape)))
         self._end += data.nbytes
 
