@@ -180,10 +180,16 @@ def _plot(results: dict[str, Any], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    panels = (["warp"] if "warp" in results else []) + (
+        ["by_size", "by_objects"] if "scaling" in results else []
+    )
+    if not panels:
+        return
+    fig, axs = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.2), squeeze=False)
+    axes = dict(zip(panels, axs[0], strict=True))
     if "warp" in results:
         w = results["warp"]
-        ax = axes[0]
+        ax = axes["warp"]
         for key, label in (
             ("kornia_s", "kornia remap"),
             ("sparse_views_s", "sparse G·C"),
@@ -195,8 +201,8 @@ def _plot(results: dict[str, Any], path: str) -> None:
         ax.legend()
     if "scaling" in results:
         for ax, part, xkey, xlabel in (
-            (axes[1], "by_size", "size", "image side (pixels)"),
-            (axes[2], "by_objects", "objects", "objects (41 views each)"),
+            (axes["by_size"], "by_size", "size", "image side (pixels)"),
+            (axes["by_objects"], "by_objects", "objects", "objects (41 views each)"),
         ):
             rows = results["scaling"][part]
             for kind in ("explicit", "exact", "randomized"):
@@ -321,8 +327,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         ("peak MiB", "peak_mib", ".1f"),
         ("passes", "passes", "d"),
         ("P·N·4 MiB", "data_matrix_mib", ".1f"),
-        ("P²·8 MiB", "gram_mib", ".1f"),
-        ("panel MiB", "panel_mib", ".1f"),
+        ("min(P,N)²·8 MiB", "gram_mib", ".1f"),
+        ("held views MiB", "panel_mib", ".1f"),
     ]
     panel = 205  # views per panel of the exact Gram path (5 objects): memory is a panel plus P²
     if "scaling" in args.sections:

@@ -190,10 +190,17 @@ def _measure(spec: dict[str, Any]) -> dict[str, Any]:
     n = result["objects"] * 41
     features = result["channels"] * result["size"] ** 2
     result["data_matrix_mib"] = n * features * 4 / 2**20
-    result["gram_mib"] = n * n * 8 / 2**20
+    # The exact fit's square matrix: the P×P Gram (P < N) or the N×N scatter.
+    result["gram_mib"] = min(n, features) ** 2 * 8 / 2**20
     result["block_mib"] = 41 * features * 4 / 2**20
-    panel = min(result.get("max_views", 4096), n) if result["kind"] == "exact" else 41
-    result["panel_mib"] = panel * features * 4 / 2**20 if result["kind"] != "explicit" else 0.0
+    # Views a streaming fit holds at once: the exact Gram path a panel plus a chunk of later
+    # views, the scatter path a chunk of N/2 views, the randomized one a block.
+    max_views = result.get("max_views", 4096)
+    if result["kind"] in ("exact", "pipeline"):
+        held = min(max_views, n) + min(256, max_views, n) if n < features else features // 2
+    else:
+        held = 41 if result["kind"] == "randomized" else 0
+    result["panel_mib"] = held * features * 4 / 2**20
     return result
 
 
@@ -204,7 +211,8 @@ def bench_scaling(
 
     ``by_size``: ``size_objects`` objects (41 views each) at growing image sides; ``by_objects``:
     growing numbers of objects at ``objects_size`` x ``objects_size`` (the Gram path when
-    N > P: memory should follow a panel of ``panel`` views plus P², not P·N).
+    N > P: memory should follow a panel of ``panel`` views and a chunk plus P², and past
+    P = N a chunk plus N², never P·N).
     """
     by_size = [
         _measure(dict(kind=kind, objects=size_objects, size=s, channels=1, k=15, max_views=panel))
