@@ -490,8 +490,10 @@ def test_silhouette_aware_weights(dtype: torch.dtype, layout: str, n_sources: in
     """G·C with masks equals NovelViewWarp.apply_maps with masks and a slow loop, in both
     layouts; no foreground pixel of the result mixes in background."""
     images, maps = _setup(dtype, 2, n_sources, amplitude=2.5, seed=3)
-    images = images + 0.5  # foreground well above 0: a dark rim would show
     masks = _blob_masks(n_sources, seed=4)
+    # Foreground well above 0 and a zero background: a tap of background mixed in would
+    # pull a pixel below 0.5.
+    images = (images + 0.5) * masks[:, None]
     expected = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
     op = SparseViewOperator.from_maps(images, maps, layout=layout, masks=masks)
     _assert_close(op.views(), expected, dtype)
@@ -499,7 +501,7 @@ def test_silhouette_aware_weights(dtype: torch.dtype, layout: str, n_sources: in
     fore = expected.amax(dim=1) > 0
     assert bool(fore.any()) and bool((expected.amin(dim=1)[fore] >= 0.5 - TOL[dtype]).all())
     # Without masks the silhouette's pixels mix in the zero background.
-    plain = NovelViewWarp.apply_maps(maps, (images * masks[:, None])[:, None])[0]
+    plain = NovelViewWarp.apply_maps(maps, images[:, None])[0]
     assert float(plain.amax(dim=1)[plain.amax(dim=1) > 0].min()) < 0.5
 
 

@@ -12,7 +12,7 @@ from helpers import check_module, rand
 from torch_eigview.cameras import estimate_elevation, orthographic_coefficients
 from torch_eigview.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.row_maps import fill_row_holes, invert_row_map
-from torch_eigview.warp import NovelViewWarp, WarpMaps
+from torch_eigview.warp import NovelViewWarp, WarpMaps, _sampler
 
 # --- an analytic scene: a textured vertical cylinder on the rotation axis --------------
 #
@@ -669,3 +669,13 @@ def test_tilted_maps_differentiate_through_the_correspondence() -> None:
     with torch.no_grad():  # and the in-place path gives the same views
         again = NovelViewWarp(10.0, elevation=12.0)(view1, view2, correspondence=corr, thetas=[3.0, -4.0])
     torch.testing.assert_close(again, out.detach())
+
+
+def test_map_sampler_differentiates_through_its_fields() -> None:
+    """The sampler reuses one grid buffer when nothing is differentiated; with fields that
+    need a gradient every call gets its own grid (grid_sample keeps it for backward)."""
+    fields = torch.rand(1, 2, 2, 8, 8, dtype=torch.float64, requires_grad=True)
+    sample = _sampler(fields)
+    x, y = torch.rand(1, 2, 8, 8, dtype=torch.float64) * 7, torch.rand(1, 2, 8, 8, dtype=torch.float64) * 7
+    (sample(x, y).sum() + sample(x.flip(-1), y).sum()).backward()
+    assert fields.grad is not None and bool(fields.grad.abs().sum() > 0)

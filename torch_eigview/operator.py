@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import torch
 
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
-from torch_eigview.warp import WarpMaps
+from torch_eigview.warp import WarpMaps, _renormalize
 
 __all__ = ["SparseViewOperator"]
 
@@ -78,15 +78,12 @@ def _sparse(
     return torch.sparse_coo_tensor(torch.stack([rows, cols]), values, size, check_invariants=False).coalesce()
 
 
-def _silhouette_normalize(tent: torch.Tensor, inside: torch.Tensor, fg: torch.Tensor | None) -> torch.Tensor:
+def _silhouette_normalize(tent: torch.Tensor, inside: torch.Tensor, fg: torch.Tensor) -> torch.Tensor:
     """Tap weights (S, T, H, W, K) restricted to foreground taps and renormalized per
     target pixel over all taps of all sources; 0 where the foreground share is below 1/2
     (``NovelViewWarp.apply_maps`` with ``masks``). ``fg`` (S, T, H, W, K): the tap's mask."""
-    if fg is None:
-        return tent
     tent = tent * (fg & inside).to(tent.dtype)
-    share = tent.sum(dim=(0, -1), keepdim=True)
-    return torch.where(share >= 0.5, tent / share.clamp_min(0.5), 0.0)
+    return _renormalize(tent, tent.sum(dim=(0, -1), keepdim=True))
 
 
 def _gather_coefficients(

@@ -72,8 +72,10 @@ def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
     grid = fields.new_empty(b, t, h, w, 2)  # written in place on every call
 
     def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
-        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad):
-            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)  # out= does not differentiate
+        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad or flat.requires_grad):
+            # out= does not differentiate, and grid_sample keeps its grid for the backward
+            # pass, so a differentiated call gets a grid of its own.
+            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)
         else:
             torch.mul(x, sx, out=grid[..., 0]).sub_(1)
             torch.mul(y, sy, out=grid[..., 1]).sub_(1)
@@ -85,6 +87,12 @@ def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
         return out.view(b, t, n_fields, h, w)
 
     return sample
+
+
+def _renormalize(weighted: torch.Tensor, share: torch.Tensor) -> torch.Tensor:
+    """Silhouette-aware sampling's last step: ``weighted`` (foreground taps only) divided by
+    the foreground ``share`` of the taps, 0 where that share is below 1/2 (background)."""
+    return torch.where(share >= 0.5, weighted / share.clamp_min(0.5), 0.0)
 
 
 @dataclass(frozen=True)
@@ -359,8 +367,7 @@ class NovelViewWarp(torch.nn.Module):
             out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped.view(b, t, ch, h, w)
         if masks is None:
             return out
-        share = out[:, :, c:]
-        return torch.where(share >= 0.5, out[:, :, :c] / share.clamp_min(0.5), 0.0)
+        return _renormalize(out[:, :, :c], out[:, :, c:])
 
     def forward(
         self,
