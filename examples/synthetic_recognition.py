@@ -23,6 +23,7 @@ import json
 import time
 
 from torch_eigview.demo import SyntheticScene, default_camera, format_table, recognition_experiment
+from torch_eigview.synthetic import CAMERAS
 
 # Fig. 2(ii): (alpha, N) -> total accuracy (%).
 PAPER = {(5.0, 2): 100.0, (10.0, 2): 100.0, (15.0, 2): 99.33, (20.0, 2): 96.44, (30.0, 2): 93.77,
@@ -34,7 +35,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=64, help="image side in pixels")
     parser.add_argument("--alphas", type=float, nargs="+", default=[5, 10, 15, 20, 30])
     parser.add_argument("--views", type=int, nargs="+", default=[2, 3])
-    parser.add_argument("--camera", choices=("orthographic", "affine", "perspective"), default="orthographic")
+    parser.add_argument("--camera", choices=CAMERAS, default="orthographic")
     parser.add_argument("--json", help="write all results here")
     args = parser.parse_args()
     scene = SyntheticScene(camera=default_camera(args.camera, args.size))

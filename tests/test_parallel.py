@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from torch_eigview.bench import smooth_views
+from torch_eigview.bench_scaling import smooth_views
 from torch_eigview.parallel import synthesize_objects
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
 

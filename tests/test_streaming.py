@@ -7,7 +7,7 @@ import itertools
 import pytest
 import torch
 
-from torch_eigview.bench import smooth_views
+from torch_eigview.bench_scaling import smooth_views
 from torch_eigview.eigenspace import Eigenspace
 from torch_eigview.streaming import StreamingEigenspace, blocks_of
 

@@ -222,14 +222,24 @@ def test_demo_small(tmp_path: object) -> None:
 
 def test_rendered_gallery_is_the_ceiling() -> None:
     """``correspondences="rendered"``: the gallery is the rendered views at the gallery's
-    angles (no synthesis), so the test views at those angles are recognized with their
-    exact pose; a synthesized gallery cannot do better on them."""
+    angles (no synthesis): its codes are those of the renders, not of synthesized views,
+    and test views at the gallery's angles are then recognized with their exact pose."""
     from torch_eigview.demo import SyntheticScene, recognition_experiment
+    from torch_eigview.experiment import angle_range
 
-    scene = SyntheticScene(shapes=("head", "cylinder"), camera=OrthographicCamera(32))
+    shapes = ("head", "cylinder")
+    scene = SyntheticScene(shapes=shapes, camera=OrthographicCamera(32))
     result = recognition_experiment(10.0, 2, scene=scene, correspondences="rendered", test=(-20.0, 20.0))
     assert result["n_gallery"] == 82 and result["accuracy"] == 100.0
     assert result["pose_mae_deg"] == 0.0
+    rec = result["recognizer"]
+    assert isinstance(rec, torch.nn.Module)
+    renders = torch.cat([scene.views(n, angle_range(-20.0, 20.0, 1.0, name="t")) for n in shapes])
+    torch.testing.assert_close(rec.codes, rec.projection(renders))
+    synthesized = recognition_experiment(10.0, 2, scene=scene, correspondences="exact", test=(-20.0, 20.0))
+    other = synthesized["recognizer"]
+    assert isinstance(other, torch.nn.Module)
+    assert not torch.allclose(other.projection(renders), other.codes, atol=1e-3)
     with pytest.raises(
         ValueError, match=r"correspondences must be one of \('flow', 'exact', 'rendered'\), got 'true'"
     ):

@@ -19,6 +19,8 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
+from torch_eigview.streaming import _CHUNK
+
 __all__ = ["bench_coil100", "bench_scaling", "smooth_views"]
 
 
@@ -159,14 +161,12 @@ def _worker(spec: dict[str, Any]) -> dict[str, Any]:
                 ):
                     cache.append(synth.views)
                 extra["synthesis_s"] = time.perf_counter() - t0
-                space = StreamingEigenspace(k, method="exact", max_views=spec.get("max_views", 4096)).fit(
-                    cache
-                )
+                space = StreamingEigenspace(k, method="exact", max_views=spec["max_views"]).fit(cache)
                 passes = space.n_passes_
         elif kind == "explicit":
             Eigenspace(k).fit(torch.cat(list(source())))
         else:
-            space = StreamingEigenspace(k, method=kind, max_views=spec.get("max_views", 4096)).fit(source)
+            space = StreamingEigenspace(k, method=kind, max_views=spec["max_views"]).fit(source)
             passes = space.n_passes_
         seconds = time.perf_counter() - t0
     return {
@@ -195,9 +195,9 @@ def _measure(spec: dict[str, Any]) -> dict[str, Any]:
     result["block_mib"] = 41 * features * 4 / 2**20
     # Views a streaming fit holds at once: the exact Gram path a panel plus a chunk of later
     # views, the scatter path a chunk of N/2 views, the randomized one a block.
-    max_views = result.get("max_views", 4096)
+    max_views = result["max_views"]
     if result["kind"] in ("exact", "pipeline"):
-        held = min(max_views, n) + min(256, max_views, n) if n < features else features // 2
+        held = min(max_views, n) + min(_CHUNK, max_views, n) if n < features else features // 2
     else:
         held = 41 if result["kind"] == "randomized" else 0
     result["panel_mib"] = held * features * 4 / 2**20
@@ -236,6 +236,6 @@ def bench_coil100(n_objects: int, panel: int, explicit: bool) -> list[dict[str, 
     spec = dict(objects=n_objects, size=128, channels=3, k=15, max_views=panel)
     rows = [_measure(dict(spec, kind=k)) for k in kinds]
     # The whole build in this process (torch's threads) and over one process per CPU.
-    for workers in dict.fromkeys((0, available_cpus())):
+    for workers in (0, available_cpus()):
         rows.append(_measure(dict(spec, kind="pipeline", workers=workers)))
     return rows

@@ -24,20 +24,15 @@ from torch_eigview.projection import EigenProjection
 from torch_eigview.recognition import NearestNeighborRecognizer
 from torch_eigview.synthetic import SHAPES, OrthographicCamera
 from torch_eigview.synthetic_scene import (
-    CORRESPONDENCES,
-    SYNTHETIC_OPTIONS,
     SyntheticScene,
     _gallery_angles,
-    camera_warp,
     default_camera,
     synthesis_error,
     synthetic_gallery,
 )
 
 __all__ = [
-    "SYNTHETIC_OPTIONS",
     "SyntheticScene",
-    "camera_warp",
     "default_camera",
     "recognition_experiment",
     "run_demo",
@@ -63,9 +58,8 @@ def recognition_experiment(
         n_views: 2 or 3 seed views per object.
         scene: objects and camera (default: the five objects at 64×64).
         components: eigenspace dimension k (or an energy fraction).
-        correspondences: ``"flow"`` or ``"exact"``, see :func:`synthetic_gallery`; or
-            ``"rendered"``: no synthesis, the gallery is the *rendered* views at the same
-            angles, the protocol's ceiling (what perfect synthesis would reach).
+        correspondences: ``"flow"``, ``"exact"`` or ``"rendered"`` (the protocol's
+            ceiling), see :func:`synthetic_gallery`.
         synth: synthesized angles (start, stop, step), see :func:`synthetic_gallery`.
         test: (start, stop) of the test views, every 1°.
 
@@ -77,16 +71,8 @@ def recognition_experiment(
     scene = scene or SyntheticScene()
     t_start = time.perf_counter()
     gallery, labels, poses = [], [], []
-    if correspondences not in (*CORRESPONDENCES, "rendered"):
-        raise ValueError(
-            f"correspondences must be one of {(*CORRESPONDENCES, 'rendered')}, got {correspondences!r}"
-        )
     for i, name in enumerate(scene.shapes):
-        if correspondences == "rendered":
-            thetas = _gallery_angles(alpha, n_views, synth)[1]
-            views = scene.views(name, thetas)
-        else:
-            views, thetas = synthetic_gallery(scene, name, alpha, n_views, synth, correspondences)
+        views, thetas = synthetic_gallery(scene, name, alpha, n_views, synth, correspondences)
         gallery.append(views)
         labels += [i] * len(thetas)
         poses += thetas

@@ -230,7 +230,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _local_views(args: argparse.Namespace, rank: int, world: int) -> torch.Tensor:
     if args.root is None:
-        from torch_eigview.bench import smooth_views
+        from torch_eigview.bench_scaling import smooth_views
 
         objects = list(range(args.objects))[rank::world]
         blocks = [smooth_views(o, 41, 1, args.size) for o in objects]

@@ -86,7 +86,7 @@ def synthesize_objects(
             is shut down).
 
     Example:
-        >>> from torch_eigview.bench import smooth_views
+        >>> from torch_eigview.bench_scaling import smooth_views
         >>> seeds = [smooth_views(o, 6, 1, 32)[[0, 5]] for o in range(3)]
         >>> [s.views.shape[0] for s in synthesize_objects(seeds, 5.0, [0.0, 2.5, 5.0])]
         [3, 3, 3]

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.correspondence import Correspondence, estimate_correspondence
+from torch_eigview.correspondence import Correspondence
 from torch_eigview.experiment import angle_range
 from torch_eigview.normalize import foreground_mask
 from torch_eigview.perspective import PerspectiveWarp
-from torch_eigview.synthesis import PairGeometry, SynthesisOptions, pair_of, synthesize_views
+from torch_eigview.synthesis import PairGeometry, SynthesisOptions, pair_geometry, pair_of, synthesize_views
 from torch_eigview.synthetic import (
     CAMERAS,
     SHAPES,
@@ -45,7 +45,7 @@ __all__ = [
     "synthetic_gallery",
 ]
 
-CORRESPONDENCES = ("flow", "exact")
+CORRESPONDENCES = ("flow", "exact", "rendered")
 # Synthetic renders: no camera tilt and no size normalization (COIL's defaults), and
 # scikit-image's own TV-L1 settings (5 warps of 10 iterations; ``flow_options={}``) rather
 # than the 3 × 5 speed preset, which was validated on COIL only: on these smooth textures
@@ -141,10 +141,7 @@ def _pair_correspondence(
             return exact_correspondence_2d(obj, alpha, scene.camera, theta_1=theta_1)
         return exact_correspondence(obj, alpha, scene.camera, theta_1=theta_1)
     seeds = scene.views(name, [theta_1, theta_1 + alpha])
-    opts = SYNTHETIC_OPTIONS
-    return estimate_correspondence(
-        seeds[0], seeds[1], method=opts.flow, threshold=opts.threshold, **opts.flow_kwargs()
-    )
+    return pair_geometry(seeds, alpha, SYNTHETIC_OPTIONS)[0].correspondence
 
 
 def _camera_gallery(
@@ -236,8 +233,10 @@ def synthetic_gallery(
         alpha: angle between consecutive seed views, degrees.
         n_views: 2 or 3 seed views.
         synth: (start, stop, step) of the synthesized angles in degrees.
-        correspondences: ``"flow"`` (TV-L1 optical flow between the seed views) or
-            ``"exact"`` (from the renderer's geometry).
+        correspondences: ``"flow"`` (TV-L1 optical flow between the seed views),
+            ``"exact"`` (from the renderer's geometry) or ``"rendered"``: no synthesis, the
+            *rendered* views at the same angles (the protocol's ceiling: what perfect
+            synthesis would give).
 
     Returns:
         ``(views, thetas)``: (T, 1, H, W) views and their T angles in degrees.
@@ -245,6 +244,8 @@ def synthetic_gallery(
     if correspondences not in CORRESPONDENCES:
         raise ValueError(f"correspondences must be one of {CORRESPONDENCES}, got {correspondences!r}")
     first, thetas = _gallery_angles(alpha, n_views, synth)
+    if correspondences == "rendered":
+        return scene.views(name, thetas), thetas
     if not _is_plain_orthographic(scene.camera):
         return _camera_gallery(scene, name, alpha, first, n_views, thetas, correspondences), thetas
     seeds = scene.views(name, [first + n * alpha for n in range(n_views)])
