@@ -172,7 +172,7 @@ def fit_distributed(
             _, s, wt = torch.linalg.svd(z, full_matrices=False)
             eigvals = s.square()
             k = select_k(
-                n_components, above_tolerance(eigvals, n_views, n_features, dtype), total, "views", n_views
+                n_components, above_tolerance(eigvals, total, mean64, n_views, dtype), total, "views", n_views
             )
             components = wt[:k] @ q.T
         else:
@@ -191,7 +191,7 @@ def fit_distributed(
             eigvals, basis = _eigh_descending(gram, top)
             total = gram.diagonal().sum()
             k = select_k(
-                n_components, above_tolerance(eigvals, n_views, n_features, dtype), total, "views", n_views
+                n_components, above_tolerance(eigvals, total, mean64, n_views, dtype), total, "views", n_views
             )
             eigvals = eigvals[:k]
             partial = (basis[lo:hi, :k].T.to(dtype) @ xc).double()

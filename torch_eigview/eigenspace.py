@@ -115,6 +115,22 @@ def _single_threaded_blas() -> contextlib.AbstractContextManager[object]:
     return limited
 
 
+def _rank_tolerance(
+    largest: float, uncentred: float, n_views: int, n_features: int, dtype: torch.dtype
+) -> float:
+    """Eigenvalues of the centred scatter at or below this are rounding noise.
+
+    Two sources, in the data's ``dtype`` whatever precision the eigensolver ran in: the
+    Gram/scatter product, whose length-n dot products round to ~√n·eps relative to the
+    largest eigenvalue ``largest``; and the centring, which leaves each entry of X − μ off
+    by ~eps·|x|, noise of energy up to eps²·‖X‖² (``uncentred`` = ‖X‖², before centring).
+    The second alone is the largest eigenvalue of identical views whose mean does not
+    come out exact, which a bound relative to ``largest`` cannot catch.
+    """
+    root, eps = math.sqrt(max(n_views, n_features)), torch.finfo(dtype).eps
+    return max(largest * root * eps, uncentred * root * eps * eps)
+
+
 def _eigh_descending(scatter: torch.Tensor, top: int | None) -> tuple[torch.Tensor, torch.Tensor]:
     """Eigenpairs of a symmetric float64 matrix by decreasing eigenvalue; the leading ``top``
     only (or all when None).
@@ -379,11 +395,8 @@ class Eigenspace:
         # The eigenvalues sum to trace(Xc Xcᵀ) = ||Xc||², the total over all eigenvalues
         # (the trace also when only the leading ones were computed).
         total = eigvals.sum() if solver == "svd" else scatter.diagonal().sum()
-        # The scatter matrix is computed in the input dtype, so eigenvalues below this are
-        # rounding noise whatever precision eigh ran in.
-        # Rounding in a Gram/scatter product of length-n dot products is ~sqrt(n)·eps relative
-        # to the largest eigenvalue; eigenvalues below that carry no signal.
-        tol = float(eigvals[0]) * math.sqrt(max(n_views, n_features)) * torch.finfo(dtype).eps
+        uncentred = float(total) + n_views * float(mean.double().square().sum())
+        tol = _rank_tolerance(float(eigvals[0]), uncentred, n_views, n_features, dtype)
         rank = int((eigvals > tol).sum())
         if rank == 0:
             raise ValueError(f"{name} has rank 0 after centring: all {n_views} views are identical")

@@ -28,7 +28,6 @@ Two methods, both bounded in memory:
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import torch
@@ -39,6 +38,7 @@ from torch_eigview.eigenspace import (
     _Fit,
     _flip_signs,
     _gram,
+    _rank_tolerance,
 )
 from torch_eigview.errors import check_finite, check_float_tensor, check_ndim
 
@@ -150,9 +150,13 @@ def select_k(
     return min(reached, rank)
 
 
-def above_tolerance(eigvals: torch.Tensor, n_views: int, n_features: int, dtype: torch.dtype) -> torch.Tensor:
-    """The eigenvalues above ``Eigenspace``'s rank tolerance max(λ)·sqrt(max(P, N))·eps(dtype)."""
-    tol = float(eigvals[0]) * math.sqrt(max(n_views, n_features)) * torch.finfo(dtype).eps
+def above_tolerance(
+    eigvals: torch.Tensor, total: torch.Tensor, mean64: torch.Tensor, n_views: int, dtype: torch.dtype
+) -> torch.Tensor:
+    """The eigenvalues above ``Eigenspace``'s rank tolerance (``eigenspace._rank_tolerance``);
+    ``total`` is the trace of the centred scatter, ``mean64`` the (N,) mean view."""
+    uncentred = float(total) + n_views * float(mean64.double().square().sum())
+    tol = _rank_tolerance(float(eigvals[0]), uncentred, n_views, mean64.numel(), dtype)
     return eigvals[eigvals > tol]
 
 
@@ -261,14 +265,14 @@ class StreamingEigenspace(Eigenspace):
         )
 
     def _leading(
-        self, scatter: torch.Tensor, stream: _Stream
+        self, scatter: torch.Tensor, stream: _Stream, mean64: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, int]:
         assert stream.dtype is not None and stream.n_views is not None
         stream.check_result(scatter, "the scatter or Gram matrix")
         top = self.n_components if isinstance(self.n_components, int) else None
         eigvals, basis = _eigh_descending(scatter, top)
         total = scatter.diagonal().sum()
-        kept = above_tolerance(eigvals, stream.n_views, _n_features(stream), stream.dtype)
+        kept = above_tolerance(eigvals, total, mean64, stream.n_views, stream.dtype)
         k = select_k(self.n_components, kept, total, "the streamed views", stream.n_views)
         return eigvals[:k], basis[:, :k], total, k
 
@@ -286,7 +290,7 @@ class StreamingEigenspace(Eigenspace):
             start += b.shape[0]
         chunks.close()
         self.n_passes_ = 2
-        eigvals, basis, total, _ = self._leading(scatter, stream)
+        eigvals, basis, total, _ = self._leading(scatter, stream, mean64)
         return self._finish(stream, mean64, basis.T, eigvals, total)
 
     def _exact_gram(self, stream: _Stream, mean64: torch.Tensor) -> _Fit:
@@ -322,7 +326,7 @@ class StreamingEigenspace(Eigenspace):
                 start = stop
             chunks.close()
             del panel, chunks
-        eigvals, basis, total, _ = self._leading(gram, stream)
+        eigvals, basis, total, _ = self._leading(gram, stream, mean64)
         # Components Λ^(−1/2) Vᵀ Xc, one block of Xc at a time; the products in the data's
         # dtype as Eigenspace does, the sum in float64.
         comp = torch.zeros(eigvals.numel(), mean.numel(), dtype=torch.float64, device=mean.device)
@@ -355,7 +359,7 @@ class StreamingEigenspace(Eigenspace):
         assert stream.n_views is not None and stream.dtype is not None
         _, s, wt = torch.linalg.svd(z, full_matrices=False)
         eigvals = s.square()
-        kept = above_tolerance(eigvals, stream.n_views, mean64.numel(), stream.dtype)
+        kept = above_tolerance(eigvals, total, mean64, stream.n_views, stream.dtype)
         k = select_k(self.n_components, kept, total, "the streamed views", stream.n_views)
         if not isinstance(self.n_components, int) and float(eigvals[:k].sum() / total) < self.n_components:
             raise ValueError(
@@ -363,11 +367,6 @@ class StreamingEigenspace(Eigenspace):
                 "directions of the randomized sketch: raise oversample or use method='exact'"
             )
         return self._finish(stream, mean64, wt[:k] @ q.T, eigvals[:k], total)
-
-
-def _n_features(stream: _Stream) -> int:
-    assert stream.feature_shape is not None
-    return math.prod(stream.feature_shape)
 
 
 class _Chunks:
