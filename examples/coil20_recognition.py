@@ -24,7 +24,8 @@ import json
 import time
 from pathlib import Path
 
-from torch_eigview import CoilExperiment, CoilFolder, SynthesisOptions
+from torch_eigview import CoilFolder, SynthesisOptions
+from torch_eigview.apps.experiment import CoilExperiment
 
 PAPER = {5: 97.89, 10: 93.42, 15: 91.42}
 DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"

@@ -21,7 +21,8 @@ import argparse
 import time
 from pathlib import Path
 
-from torch_eigview import CoilExperiment, CoilFolder, KernelEigenspace, KernelProjection
+from torch_eigview import CoilFolder, KernelEigenspace, KernelProjection
+from torch_eigview.apps.experiment import CoilExperiment
 
 DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
 METHODS: dict[str, dict[str, object]] = {

@@ -29,10 +29,10 @@ import time
 
 import torch
 
-from torch_eigview.eigenspace import Eigenspace
+from torch_eigview.apps.synthetic_scene import SYNTHETIC_OPTIONS
+from torch_eigview.datasets.renderer import OrthographicCamera, exact_correspondence, make_object, render
+from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.synthesis import PairGeometry, synthesize_views
-from torch_eigview.synthetic import OrthographicCamera, exact_correspondence, make_object, render
-from torch_eigview.synthetic_scene import SYNTHETIC_OPTIONS
 
 H, W, N_TRUE = 70, 60, 48
 SUBSETS = (4, 6, 8, 12, 16, 24)

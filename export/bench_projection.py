@@ -8,7 +8,7 @@ and 256, it times the same basis in
 - ``ort-plain``: onnxruntime on the projection's ``forward`` as written (Sub, MatMul),
   default session options (but no spinning, as for every session here);
 - ``ort``: onnxruntime on the folded graph ``z = x @ Wᵀ − mean @ Wᵀ``
-  (:func:`torch_eigview.onnx.export_projection`), ``intra_op_num_threads`` = the torch
+  (:func:`torch_eigview.io.onnx.export_projection`), ``intra_op_num_threads`` = the torch
   threads, all graph optimizations;
 - ``sklearn``: ``PCA.transform`` with ``components_`` and ``mean_`` set to the same basis
   (the reference of the ratios).
@@ -40,7 +40,7 @@ import torch
 from sklearn.decomposition import PCA
 
 from torch_eigview import EigenProjection
-from torch_eigview.onnx import export_projection
+from torch_eigview.io.onnx import export_projection
 
 IMAGE_SHAPE = (1, 128, 128)
 BATCHES = (1, 32, 256)

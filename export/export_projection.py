@@ -7,7 +7,7 @@ Usage::
 
 The same as ``eigview export``, plus a check: onnxruntime against eager PyTorch on random
 images (batches 1, 7 and 32; the batch axis is dynamic). The graph is
-:func:`torch_eigview.onnx.export_projection`'s: images (B, C, H, W) float32 → (B, k), or
+:func:`torch_eigview.io.onnx.export_projection`'s: images (B, C, H, W) float32 → (B, k), or
 with ``--recognizer`` → label index, pose, distance; its metadata holds the input size, k,
 the label names and the unit-norm flag.
 """
@@ -19,7 +19,7 @@ import argparse
 import torch
 
 from torch_eigview import load_recognizer
-from torch_eigview.onnx import compare_with_eager, export_projection, export_recognizer
+from torch_eigview.io.onnx import compare_with_eager, export_projection, export_recognizer
 
 
 def main() -> None:

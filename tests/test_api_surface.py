@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
+import importlib
 import importlib.metadata
 from pathlib import Path
+
+import pytest
 
 import torch_eigview
 
 PUBLIC = [
-    "AffineCamera",
-    "CoilExperiment",
     "CoilFolder",
-    "CoilResult",
     "Correspondence",
     "EigenProjection",
     "Eigenspace",
@@ -20,43 +20,108 @@ PUBLIC = [
     "NearestNeighborRecognizer",
     "NotFittedError",
     "NovelViewWarp",
-    "OrthographicCamera",
-    "PerspectiveCamera",
     "PerspectiveWarp",
-    "Recognition",
     "SparseViewOperator",
     "StreamingEigenspace",
     "SynthesisOptions",
     "SynthesizedViews",
-    "ViewCache",
-    "WarpMaps",
     "affine_coefficients",
-    "blocks_of",
-    "correspondence_from_disparity",
     "estimate_correspondence",
     "estimate_elevation",
-    "exact_correspondence",
-    "exact_correspondence_2d",
-    "fit_distributed",
-    "foreground_mask",
-    "invert_map_2d",
     "load_recognizer",
-    "make_camera",
-    "make_object",
-    "normalize_extent",
-    "novel_view_tensor",
-    "novel_view_tensor_from_cameras",
     "orthographic_coefficients",
-    "parse_object_spec",
-    "render",
-    "render_views",
     "save_recognizer",
-    "synthesize_objects",
     "synthesize_views",
-    "transfer_points",
-    "trifocal_tensor",
-    "view_correspondence",
 ]
+
+# Each subpackage's public names (its __all__).
+SUBPACKAGES = {
+    "geometry": [
+        "AffineCoefficients",
+        "Correspondence",
+        "affine_coefficients",
+        "correspondence_from_disparity",
+        "epipoles_from_tensor",
+        "estimate_correspondence",
+        "estimate_elevation",
+        "fill_row_holes",
+        "fundamental_from_tensor",
+        "invert_row_map",
+        "novel_view_tensor",
+        "novel_view_tensor_from_cameras",
+        "orthographic_coefficients",
+        "rotation_y",
+        "seed_tensor",
+        "tensor_from_fundamental",
+        "transfer_points",
+        "transform_tensor",
+        "trifocal_tensor",
+    ],
+    "warp": [
+        "BLENDS",
+        "NovelViewWarp",
+        "PerspectiveWarp",
+        "SparseViewOperator",
+        "WarpMaps",
+        "foreground_mask",
+        "invert_map_2d",
+        "normalize_extent",
+        "turntable_pose",
+    ],
+    "decomposition": [
+        "BlockSource",
+        "Eigenspace",
+        "KernelEigenspace",
+        "StreamingEigenspace",
+        "blocks_of",
+    ],
+    "nn": [
+        "EigenProjection",
+        "KERNELS",
+        "KernelProjection",
+        "NearestNeighborRecognizer",
+        "Recognition",
+        "pairwise_kernel",
+        "unit_rows",
+    ],
+    "scale": [
+        "ViewCache",
+        "available_cpus",
+        "fit_distributed",
+        "synthesize_objects",
+    ],
+    "io": [
+        "OnnxModelInfo",
+        "compare_with_eager",
+        "export_onnx",
+        "export_projection",
+        "export_recognizer",
+        "load_recognizer",
+        "read_image",
+        "read_metadata",
+        "save_recognizer",
+    ],
+    "datasets": [
+        "AffineCamera",
+        "CAMERAS",
+        "CoilFolder",
+        "OrthographicCamera",
+        "PerspectiveCamera",
+        "Render",
+        "SHAPES",
+        "SyntheticObject",
+        "ViewCorrespondence",
+        "exact_correspondence",
+        "exact_correspondence_2d",
+        "make_camera",
+        "make_object",
+        "parse_object_spec",
+        "render",
+        "render_views",
+        "seen_error",
+        "view_correspondence",
+    ],
+}
 
 
 def test_all_is_the_documented_surface() -> None:
@@ -75,6 +140,24 @@ def test_star_import_gives_all() -> None:
     namespace: dict[str, object] = {}
     exec("from torch_eigview import *", namespace)
     assert set(namespace) - {"__builtins__"} == set(PUBLIC)
+
+
+@pytest.mark.parametrize("subpackage", sorted(SUBPACKAGES))
+def test_subpackage_surface(subpackage: str) -> None:
+    module = importlib.import_module(f"torch_eigview.{subpackage}")
+    assert sorted(module.__all__) == SUBPACKAGES[subpackage]
+    missing = [name for name in module.__all__ if getattr(module, name, None) is None]
+    assert not missing, f"torch_eigview.{subpackage} lacks {missing}"
+
+
+def test_core_names_come_from_their_subpackage() -> None:
+    """A top-level name is the same object as the one its subpackage exports."""
+    for name in PUBLIC:
+        homes = [s for s, names in SUBPACKAGES.items() if name in names]
+        for s in homes:
+            assert getattr(importlib.import_module(f"torch_eigview.{s}"), name) is getattr(
+                torch_eigview, name
+            )
 
 
 def test_not_fitted_error_is_value_and_attribute_error() -> None:

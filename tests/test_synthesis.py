@@ -8,8 +8,14 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.correspondence import estimate_correspondence
-from torch_eigview.data import CoilFolder
+from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.datasets.renderer import (
+    OrthographicCamera,
+    exact_correspondence,
+    make_object,
+    render_views,
+)
+from torch_eigview.geometry.correspondence import estimate_correspondence
 from torch_eigview.synthesis import (
     PairGeometry,
     SynthesisOptions,
@@ -17,8 +23,7 @@ from torch_eigview.synthesis import (
     pair_of,
     synthesize_views,
 )
-from torch_eigview.synthetic import OrthographicCamera, exact_correspondence, make_object, render_views
-from torch_eigview.warp import NovelViewWarp
+from torch_eigview.warp.novel_view import NovelViewWarp
 
 ALPHA = 10.0
 # The paper's orthographic camera and no size normalization: synthesize_views is then the

@@ -2,6 +2,6 @@
 
 import sys
 
-from torch_eigview.cli import main
+from torch_eigview.apps.cli import main
 
 sys.exit(main())

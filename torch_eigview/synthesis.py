@@ -31,11 +31,11 @@ from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.cameras import estimate_elevation
-from torch_eigview.correspondence import Correspondence, estimate_correspondence
-from torch_eigview.errors import as_angle_tensor, check_alpha, check_finite, check_float_tensor, check_ndim
-from torch_eigview.normalize import foreground_mask, normalize_extent
-from torch_eigview.warp import BLENDS, NovelViewWarp
+from torch_eigview.check import as_angle_tensor, check_alpha, check_finite, check_float_tensor, check_ndim
+from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
+from torch_eigview.geometry.pose import estimate_elevation
+from torch_eigview.warp.normalize import foreground_mask, normalize_extent
+from torch_eigview.warp.novel_view import BLENDS, NovelViewWarp
 
 __all__ = [
     "PairGeometry",
@@ -59,16 +59,16 @@ class SynthesisOptions:
         elevation: camera elevation in degrees (0: the paper's orthographic camera, rows
             stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow.
         extent: size-normalize each synthesized view as the data set's images are
-            (:func:`~torch_eigview.normalize.normalize_extent`; COIL's processed set is).
+            (:func:`~torch_eigview.warp.normalize.normalize_extent`; COIL's processed set is).
         background: intensity below which a pixel is background (for ``extent`` and the
             elevation fit).
         center: column of the rotation axis, default the image's centre column.
-        max_stretch: see :class:`~torch_eigview.warp.NovelViewWarp`.
+        max_stretch: see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`.
         flow_options: keyword arguments for the scikit-image flow function. By default
             TV-L1 runs 3 warps of 5 iterations (scikit-image's defaults are 5 and 10):
             3x faster, and on COIL-20 as accurate (see the README).
         blend: how the two seeds of a pair share the pixels both see, ``"linear"`` or
-            ``"nearest"`` (see :class:`~torch_eigview.warp.NovelViewWarp`).
+            ``"nearest"`` (see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`).
         silhouette: silhouette-aware sampling: only the seeds' foreground pixels
             (``background``) enter a synthesized pixel, renormalized, and a pixel less
             than half covered by them is background (``NovelViewWarp.apply_maps`` with

@@ -1,0 +1,181 @@
+"""Tests for the ``eigview`` command: a small COIL run, its outputs, and exit status 2 on bad input."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from torch_eigview.apps.cli import main
+from torch_eigview.io.checkpoint import load_recognizer
+
+# Two objects, seeds at 0 and 10 degrees, 4 synthesized views each, 5 test views each.
+SMALL = [
+    "--alpha", "10",
+    "--synth", "-5", "10", "5",
+    "--test", "-10", "10",
+    "--objects", "1-2",
+    "--components", "3",
+    "--elevation", "0",
+]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def small_run(coil_root: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    """Runs ``eigview coil ... --json --save`` once; capsys is per test, so capture here."""
+    out_dir = tmp_path_factory.mktemp("cli")
+    json_path, model_path = out_dir / "result.json", out_dir / "model.pt"
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        status = main(
+            ["coil", "--root", str(coil_root), *SMALL, "--json", str(json_path), "--save", str(model_path)]
+        )
+    return {"status": status, "stdout": stdout.getvalue(), "json": json_path, "model": model_path}
+
+
+@pytest.mark.coil
+def test_run_writes_json(small_run: dict[str, object]) -> None:
+    assert small_run["status"] == 0
+    record = json.loads(Path(small_run["json"]).read_text())  # type: ignore[arg-type]
+    assert set(record) == {"accuracy", "per_object", "pose_mae_deg", "n_test", "n_train_views", "seconds"}
+    assert set(record["per_object"]) == {"1", "2"}
+    assert record["n_test"] == 2 * 5
+    assert record["n_train_views"] == 2 * 4
+    assert 0.0 <= record["accuracy"] <= 100.0
+    assert set(record["seconds"]) == {"correspondence", "synthesis", "eigen", "recognition", "total"}
+
+
+@pytest.mark.coil
+def test_run_saves_loadable_model(small_run: dict[str, object], coil_root: Path) -> None:
+    from torch_eigview.datasets.coil import CoilFolder
+
+    rec, meta = load_recognizer(small_run["model"])  # type: ignore[arg-type]
+    record = json.loads(Path(small_run["json"]).read_text())  # type: ignore[arg-type]
+    assert meta == {"command": "coil", "alpha": 10.0, "method": "nvs", "accuracy": record["accuracy"]}
+    assert rec.n_gallery == record["n_train_views"]
+    assert rec.projection.unit_norm is True and rec.projection.n_components == 3
+    # The saved model recognizes object 2's real 0-degree view as object 2.
+    view = CoilFolder(coil_root).images(2, [0.0])
+    assert rec.predict(view).labels.tolist() == [2]
+
+
+@pytest.mark.coil
+def test_run_prints_table(small_run: dict[str, object]) -> None:
+    text = str(small_run["stdout"])
+    record = json.loads(Path(small_run["json"]).read_text())  # type: ignore[arg-type]
+    lines = text.splitlines()
+    assert lines[0].startswith("COIL nvs: alpha=10, 2 seed views")
+    rows = {line.split()[0]: line for line in lines if line.split() and line.split()[0] in {"O1", "O2"}}
+    assert set(rows) == {"O1", "O2"}
+    for obj in ("1", "2"):
+        assert float(rows[f"O{obj}"].split()[1]) == pytest.approx(record["per_object"][obj], abs=0.005)
+    total = [line for line in lines if line.split() and line.split()[0] == "Total"]
+    assert len(total) == 1
+    assert float(total[0].split()[1]) == pytest.approx(record["accuracy"], abs=0.005)
+    assert "test images 10, gallery views 8" in text
+
+
+def _exit_status(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    return int(info.value.code), capsys.readouterr().err  # type: ignore[arg-type]
+
+
+def test_empty_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, err = _exit_status(["coil", "--root", str(tmp_path), "--alpha", "10"], capsys)
+    assert code == 2
+    assert "holds no COIL files" in err and str(tmp_path) in err
+
+
+def test_missing_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, err = _exit_status(["coil", "--root", str(tmp_path / "nope"), "--alpha", "10"], capsys)
+    assert code == 2
+    assert "must be an existing directory" in err
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--components", "0"], "--components must be an int >= 1 or a fraction in (0, 1)"),
+        (["--components", "many"], "--components must be an int or a fraction in (0, 1)"),
+        (["--objects", "5-3"], "reversed range 5-3"),
+        (["--objects", "a"], "must look like '1-20'"),
+        (["--elevation", "up"], "--elevation must be 'auto' or degrees"),
+        (["--views", "4"], "invalid choice: 4"),
+        (["--method", "knn"], "invalid choice: 'knn'"),
+    ],
+    ids=[
+        "components-0",
+        "components-text",
+        "objects-reversed",
+        "objects-text",
+        "elevation",
+        "views",
+        "method",
+    ],
+)
+def test_bad_arguments(
+    extra: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Argument errors come before the folder is read; the folder is a real (empty) one anyway.
+    code, err = _exit_status(["coil", "--root", str(tmp_path), "--alpha", "10", *extra], capsys)
+    assert code == 2
+    assert message in err
+
+
+def test_missing_arguments(capsys: pytest.CaptureFixture[str]) -> None:
+    assert _exit_status([], capsys)[0] == 2
+    code, err = _exit_status(["coil", "--alpha", "10"], capsys)
+    assert code == 2 and "--root" in err
+
+
+@pytest.mark.coil
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--alpha", "0", "--objects", "1"], "alpha=0.0 must not be a multiple of 180 degrees"),
+        (["--alpha", "10", "--synth", "0", "10", "-1"], "synth step must be positive, got -1.0"),
+        (["--alpha", "10", "--objects", "1,99", "--method", "sparse"], "objects [99] are not in"),
+    ],
+    ids=["alpha_zero", "negative_synth_step", "unknown_object"],
+)
+def test_bad_experiment_arguments(
+    coil_root: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
+) -> None:
+    code, err = _exit_status(["coil", "--root", str(coil_root), *extra], capsys)
+    assert code == 2
+    assert message in err
+
+
+@pytest.mark.coil
+def test_module_entry_point(coil_root: Path, tmp_path: Path) -> None:
+    argv = [
+        sys.executable, "-m", "torch_eigview", "coil",
+        "--root", str(coil_root),
+        "--alpha", "10",
+        "--synth", "0", "5", "5",
+        "--test", "0", "5",
+        "--objects", "1-2",
+        "--components", "2",
+        "--elevation", "0",
+        "--json", str(tmp_path / "r.json"),
+    ]  # fmt: skip
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "Total" in proc.stdout and "O1" in proc.stdout and "O2" in proc.stdout
+    record = json.loads((tmp_path / "r.json").read_text())
+    assert record["n_test"] == 4 and record["n_train_views"] == 4
+
+    bad = subprocess.run(
+        [sys.executable, "-m", "torch_eigview", "coil", "--root", str(tmp_path), "--alpha", "10"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
+    assert bad.returncode == 2 and "holds no COIL files" in bad.stderr

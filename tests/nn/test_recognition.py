@@ -1,0 +1,252 @@
+"""Tests for ``NearestNeighborRecognizer``: a brute-force reference, module invariants, errors."""
+
+from __future__ import annotations
+
+import copy
+import io
+
+import pytest
+import torch
+
+from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
+
+IMAGE_SHAPE = (1, 4, 6)
+N_FEATURES = 24
+K = 5
+N_GALLERY = 40
+TOL = {torch.float32: dict(atol=1e-5, rtol=1e-5), torch.float64: dict(atol=1e-10, rtol=1e-10)}
+DTYPES = pytest.mark.parametrize("dtype", [torch.float32, torch.float64], ids=["float32", "float64"])
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+def randn(*shape: int, seed: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Normal data made on the CPU in float64 with a fixed seed, then cast."""
+    gen = torch.Generator().manual_seed(seed)
+    return torch.randn(*shape, generator=gen, dtype=torch.float64).to(dtype)
+
+
+def make_projection(
+    dtype: torch.dtype = torch.float64, *, unit_norm: bool = False, seed: int = 0
+) -> EigenProjection:
+    """A projection onto K random orthonormal directions of the N_FEATURES-dim view space."""
+    q, _ = torch.linalg.qr(randn(N_FEATURES, K, seed=seed))
+    mean = randn(N_FEATURES, seed=seed + 1)
+    eigenvalues = torch.linspace(5.0, 1.0, K, dtype=torch.float64)
+    return EigenProjection(
+        mean.to(dtype),
+        q.T.contiguous().to(dtype),
+        eigenvalues.to(dtype),
+        IMAGE_SHAPE,
+        unit_norm=unit_norm,
+    )
+
+
+def make_recognizer(
+    dtype: torch.dtype = torch.float64, *, unit_norm: bool = False, seed: int = 0
+) -> NearestNeighborRecognizer:
+    """Random codes (G, K), labels in 0..3 (all present) and poses."""
+    codes = randn(N_GALLERY, K, seed=seed + 2, dtype=dtype)
+    labels = torch.arange(N_GALLERY) % 4
+    poses = torch.arange(N_GALLERY, dtype=dtype) * 5.0 - 90.0
+    projection = make_projection(dtype, unit_norm=unit_norm, seed=seed)
+    return NearestNeighborRecognizer(projection, codes, labels, poses)
+
+
+def brute_force(
+    rec: NearestNeighborRecognizer, x: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The reference: every pairwise distance (no |a|² - 2ab + |b|² expansion), then argmin."""
+    z = rec.projection(x)
+    d = torch.cdist(z, rec.codes, compute_mode="donot_use_mm_for_euclid_dist")
+    best, index = d.min(dim=1)
+    return rec.labels[index], rec.poses[index], best, index
+
+
+@DTYPES
+@pytest.mark.parametrize("device", DEVICES)
+def test_matches_brute_force(dtype: torch.dtype, device: str) -> None:
+    rec = make_recognizer(dtype).to(device)
+    x = randn(30, *IMAGE_SHAPE, seed=10, dtype=dtype).to(device)
+    labels, poses, distances, index = brute_force(rec, x)
+
+    out = rec(x)
+    assert isinstance(out, tuple) and len(out) == 3
+    for t in out:
+        assert t.shape == (30,) and t.device == x.device
+    assert out[0].dtype == torch.int64 and out[1].dtype == dtype and out[2].dtype == dtype
+    torch.testing.assert_close(out[0], labels, atol=0, rtol=0)
+    torch.testing.assert_close(out[1], poses, atol=0, rtol=0)
+    torch.testing.assert_close(out[2], distances, **TOL[dtype])
+
+    pred = rec.predict(x)
+    assert isinstance(pred, Recognition)
+    torch.testing.assert_close(pred.indices, index, atol=0, rtol=0)
+    torch.testing.assert_close(pred.labels, labels, atol=0, rtol=0)
+    torch.testing.assert_close(pred.poses, poses, atol=0, rtol=0)
+    torch.testing.assert_close(pred.distances, distances, **TOL[dtype])
+
+
+@DTYPES
+def test_flat_and_image_inputs_agree(dtype: torch.dtype) -> None:
+    rec = make_recognizer(dtype)
+    x = randn(8, *IMAGE_SHAPE, seed=11, dtype=dtype)
+    for a, b in zip(rec(x), rec(x.flatten(1)), strict=True):
+        torch.testing.assert_close(a, b, atol=0, rtol=0)
+
+
+@DTYPES
+def test_exact_gallery_views_are_found(dtype: torch.dtype) -> None:
+    projection = make_projection(dtype)
+    views = 10 * randn(12, *IMAGE_SHAPE, seed=12, dtype=dtype)
+    labels = torch.tensor([3, 7, 9] * 4)
+    poses = torch.arange(12, dtype=dtype) * 5.0
+    rec = NearestNeighborRecognizer.from_views(projection, views, labels, poses, label_names=["a", "b", "c"])
+    pred = rec.predict(views)
+    torch.testing.assert_close(pred.indices, torch.arange(12), atol=0, rtol=0)
+    torch.testing.assert_close(pred.labels, labels, atol=0, rtol=0)
+    torch.testing.assert_close(pred.poses, poses, atol=0, rtol=0)
+    # |z|² - 2 z·g + |g|² cancels down to rounding noise of order eps·|z|²; the distance is
+    # its square root, so "zero" means below a few sqrt(eps)·|z|, not below eps.
+    scale = float(rec.codes.norm(dim=1).max())
+    assert float(pred.distances.max()) <= 8 * torch.finfo(dtype).eps ** 0.5 * scale
+    assert rec.label_names == ["a", "b", "c"]
+
+
+@DTYPES
+def test_unit_norm_ignores_brightness(dtype: torch.dtype) -> None:
+    projection = make_projection(dtype, unit_norm=True)
+    gallery = randn(20, *IMAGE_SHAPE, seed=13, dtype=dtype)
+    rec = NearestNeighborRecognizer.from_views(
+        projection, gallery, torch.arange(20) % 5, torch.arange(20, dtype=dtype)
+    )
+    x = randn(9, *IMAGE_SHAPE, seed=14, dtype=dtype)
+    bright, plain = rec.predict(3 * x), rec.predict(x)
+    torch.testing.assert_close(bright.indices, plain.indices, atol=0, rtol=0)
+    torch.testing.assert_close(bright.labels, plain.labels, atol=0, rtol=0)
+    torch.testing.assert_close(bright.poses, plain.poses, atol=0, rtol=0)
+    torch.testing.assert_close(bright.distances, plain.distances, **TOL[dtype])
+    # And a scaled gallery view is still that view.
+    again = rec.predict(3 * gallery)
+    torch.testing.assert_close(again.indices, torch.arange(20), atol=0, rtol=0)
+
+
+def test_state_dict_round_trip_into_fresh_recognizer() -> None:
+    rec = make_recognizer(torch.float64, unit_norm=True, seed=0)
+    fresh = make_recognizer(torch.float64, unit_norm=False, seed=100)
+    x = randn(10, *IMAGE_SHAPE, seed=15)
+    assert not torch.equal(fresh(x)[2], rec(x)[2])
+
+    buffer = io.BytesIO()
+    torch.save(rec.state_dict(), buffer)
+    buffer.seek(0)
+    fresh.load_state_dict(torch.load(buffer, weights_only=True))
+
+    assert fresh.projection.unit_norm is True  # extra state of the projection
+    assert fresh.projection.image_shape == IMAGE_SHAPE
+    for a, b in zip(fresh(x), rec(x), strict=True):
+        torch.testing.assert_close(a, b, atol=0, rtol=0)
+    assert set(rec.state_dict()) >= {"codes", "codes_sqnorm", "labels", "poses", "projection.mean"}
+    assert not list(rec.parameters())  # frozen state lives in buffers
+
+
+def test_module_invariants() -> None:
+    rec = make_recognizer(torch.float64)
+    x = randn(7, *IMAGE_SHAPE, seed=16)
+    before = x.clone()
+    out = rec(x)
+    torch.testing.assert_close(x, before, atol=0, rtol=0)  # input not modified in place
+    per_sample = [rec(x[i : i + 1]) for i in range(7)]
+    for j in range(3):
+        torch.testing.assert_close(out[j], torch.cat([p[j] for p in per_sample]))
+
+    buffer = io.BytesIO()
+    torch.save(rec, buffer)
+    buffer.seek(0)
+    unpickled = torch.load(buffer, weights_only=False)
+    assert repr(unpickled) == repr(rec)
+    for a, b in zip(unpickled(x), out, strict=True):
+        torch.testing.assert_close(a, b, atol=0, rtol=0)
+
+    as_float = copy.deepcopy(rec).float()
+    assert as_float.codes.dtype == torch.float32 and as_float.labels.dtype == torch.int64
+    torch.testing.assert_close(as_float(x.float())[0], out[0], atol=0, rtol=0)
+    assert f"gallery={N_GALLERY}, labels=4" in repr(rec)
+
+
+@pytest.mark.parametrize("shape", [(0, *IMAGE_SHAPE), (0, N_FEATURES)], ids=["images", "flat"])
+def test_empty_batch(shape: tuple[int, ...]) -> None:
+    rec = make_recognizer(torch.float64)
+    labels, poses, distances = rec(torch.zeros(shape, dtype=torch.float64))
+    assert labels.shape == poses.shape == distances.shape == (0,)
+    assert labels.dtype == torch.int64 and poses.dtype == torch.float64
+    assert rec.predict(torch.zeros(shape, dtype=torch.float64)).indices.shape == (0,)
+
+
+def _args() -> dict[str, object]:
+    return dict(
+        projection=make_projection(),
+        codes=randn(4, K, seed=17),
+        labels=torch.tensor([0, 0, 1, 2]),
+        poses=torch.tensor([0.0, 5.0, 10.0, 15.0], dtype=torch.float64),
+    )
+
+
+@pytest.mark.parametrize(
+    ("change", "error", "match"),
+    [
+        (dict(codes=randn(4, K + 1, seed=1)), ValueError, r"codes must have shape \(G, 5\)"),
+        (dict(codes=randn(4, K, 1, seed=1)), ValueError, r"codes must have shape \(G, k\)"),
+        (dict(codes=torch.zeros(0, K, dtype=torch.float64)), ValueError, "at least one gallery view"),
+        (dict(codes=torch.zeros(4, K, dtype=torch.int64)), TypeError, "codes must have a floating dtype"),
+        (dict(codes=torch.full((4, K), float("nan"))), ValueError, "codes must be finite"),
+        (dict(labels=torch.tensor([0.0, 0.0, 1.0, 2.0])), ValueError, "labels must be an integer tensor"),
+        (
+            dict(labels=torch.tensor([0, 1, 2])),
+            ValueError,
+            r"labels must be an integer tensor of shape \(4,\)",
+        ),
+        (dict(poses=torch.zeros(3)), ValueError, r"poses must have shape \(4,\), got \(3,\)"),
+        (dict(label_names=["a", "b"]), ValueError, "label_names must name the 3 distinct labels, got 2"),
+        (dict(projection=torch.nn.Linear(N_FEATURES, K)), TypeError, "projection must be an EigenProjection"),
+    ],
+    ids=[
+        "codes-wrong-k",
+        "codes-3d",
+        "codes-empty",
+        "codes-int",
+        "codes-nan",
+        "labels-float",
+        "labels-length",
+        "poses-length",
+        "label-names-count",
+        "not-eigenprojection",
+    ],
+)
+def test_constructor_errors(change: dict[str, object], error: type[Exception], match: str) -> None:
+    args = _args()
+    args.update(change)
+    with pytest.raises(error, match=match):
+        NearestNeighborRecognizer(**args)  # type: ignore[arg-type]
+
+
+def test_input_errors() -> None:
+    rec = make_recognizer(torch.float64)
+    with pytest.raises(TypeError, match="dtype of the layer's buffers"):
+        rec(torch.zeros(2, *IMAGE_SHAPE, dtype=torch.float32))
+    with pytest.raises(ValueError, match="x must have shape"):
+        rec(torch.zeros(2, 5, dtype=torch.float64))
+
+
+def test_labels_as_list_raise_type_error() -> None:
+    args = _args()
+    args["labels"] = [0, 0, 1, 2]
+    with pytest.raises(TypeError, match="labels"):
+        NearestNeighborRecognizer(**args)  # type: ignore[arg-type]
+
+
+def test_nan_pose_is_rejected() -> None:
+    args = _args()
+    args["poses"] = torch.tensor([0.0, float("nan"), 10.0, 15.0], dtype=torch.float64)
+    with pytest.raises(ValueError, match="poses must be finite"):
+        NearestNeighborRecognizer(**args)  # type: ignore[arg-type]

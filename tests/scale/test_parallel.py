@@ -1,0 +1,93 @@
+"""Tests for ``synthesize_objects``: in-process ``synthesize_views`` as the reference."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from torch_eigview.apps.bench_scaling import smooth_views
+from torch_eigview.scale.parallel import synthesize_objects
+from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+
+THETAS = [-6.0, -2.0, 0.0, 2.5, 5.0, 9.0]
+
+
+def seeds_of(n: int, size: int = 32) -> list[torch.Tensor]:
+    return [smooth_views(o, 6, 3, size)[[0, 5]] for o in range(n)]
+
+
+def test_workers_equal_in_process_in_order() -> None:
+    """Two spawned workers give exactly the in-process views, in the input order, for a
+    generator input longer than the in-flight window (2 · workers)."""
+    seeds = seeds_of(6)
+    opts = SynthesisOptions(extent=False)
+    out = list(synthesize_objects(iter(seeds), 5.0, THETAS, opts, workers=2))
+    assert len(out) == len(seeds)
+    for s, got in zip(seeds, out, strict=True):
+        ref = synthesize_views(s, 5.0, THETAS, opts)
+        assert torch.equal(got.views, ref.views)
+        assert torch.equal(got.thetas, ref.thetas) and got.elevations == ref.elevations
+
+
+def test_in_process_and_tensor_angles() -> None:
+    seeds = seeds_of(2)
+    out = list(synthesize_objects(seeds, [5.0], torch.tensor(THETAS), workers=0))
+    for s, got in zip(seeds, out, strict=True):
+        assert torch.equal(got.views, synthesize_views(s, 5.0, THETAS).views)
+
+
+def test_worker_error_reaches_the_caller() -> None:
+    """An object's ValueError in a worker is raised here, at that object's turn; the
+    objects before it were yielded; nothing hangs."""
+    seeds = seeds_of(2)
+    bad = seeds[1][:1]  # one view: synthesize_views needs two
+    got = []
+    with pytest.raises(ValueError, match="at least 2 views"):
+        for views in synthesize_objects([seeds[0], bad, seeds[1]], 5.0, THETAS, workers=1):
+            got.append(views)
+    assert len(got) == 1
+
+
+def test_stopping_early_shuts_the_pool() -> None:
+    gen = synthesize_objects(seeds_of(5), 5.0, THETAS, workers=1)
+    first = next(gen)
+    gen.close()  # the pool is shut down, pending objects are cancelled
+    assert first.views.shape == (len(THETAS), 3, 32, 32)
+
+
+@pytest.mark.parametrize(
+    ("workers", "error", "match"),
+    [
+        (-1, ValueError, r"workers=-1 must be >= 0"),
+        (1.5, TypeError, "workers must be an int"),
+        (True, TypeError, "workers must be an int"),
+    ],
+)
+def test_bad_workers(workers: object, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        next(synthesize_objects(seeds_of(1), 5.0, THETAS, workers=workers))  # type: ignore[arg-type]
+
+
+def test_bad_object_type() -> None:
+    with pytest.raises(TypeError, match=r"objects must yield \(V, C, H, W\) tensors, got list"):
+        next(synthesize_objects([[1.0, 2.0]], 5.0, THETAS, workers=1))  # type: ignore[list-item]
+
+
+def test_bad_arguments_raise_before_any_process() -> None:
+    with pytest.raises(ValueError, match="thetas must be finite"):
+        next(synthesize_objects(seeds_of(1), 5.0, [1.0, float("nan")], workers=2))
+    with pytest.raises(ValueError, match="at least 2 views"):
+        next(synthesize_objects([seeds_of(1)[0][:1]], 5.0, THETAS, workers=2))
+    with pytest.raises(TypeError, match="options must be a SynthesisOptions or None, got dict"):
+        next(synthesize_objects(seeds_of(1), 5.0, THETAS, {"flow": "ilk"}, workers=2))  # type: ignore[arg-type]
+    assert list(synthesize_objects([], 5.0, THETAS, workers=2)) == []
+
+
+def test_shared_memory_stays_with_the_pool() -> None:
+    """Seeds are copied before they are sent (sending moves a storage into shared memory,
+    the caller's whole tensor with it) and results are copied out of it."""
+    big = torch.cat(seeds_of(3))  # (6, 3, 32, 32); the objects are views of it
+    objects = [big[2 * i : 2 * i + 2] for i in range(3)]
+    out = list(synthesize_objects(objects, 5.0, THETAS, workers=1))
+    assert not big.is_shared()
+    assert not any(o.views.is_shared() for o in out)

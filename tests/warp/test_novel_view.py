@@ -1,0 +1,681 @@
+"""Novel-view warp: loops against the row-map inversion, analytic scenes against the warp."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+import torch
+from tests.helpers import check_module, rand
+
+from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
+from torch_eigview.geometry.pose import estimate_elevation, orthographic_coefficients
+from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.warp.novel_view import NovelViewWarp, WarpMaps, _sampler
+
+# --- an analytic scene: a textured vertical cylinder on the rotation axis --------------
+#
+# A point at angle psi on a cylinder of radius R is X = R sin(psi), Z = R cos(psi); the
+# camera at phi sees it at x - c = R sin(psi + phi) (Eq. 2's orthographic camera), in front
+# when cos(psi + phi) > 0. A camera tilted by `elevation` also moves it vertically:
+# y = Y - sin(elevation) (Z cos(phi) - X sin(phi)) = Y - tilt R cos(psi + phi).
+
+H, W = 24, 48
+R = 18.0
+BG = 0.2
+ALPHA = 20.0
+
+
+def _texture(psi: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    s = R * psi  # arc length in pixels: wavelengths of 14 px and more, smooth for bilinear
+    return 0.5 + 0.25 * torch.sin(s / 2.3) * torch.cos(y / 3.1) + 0.15 * torch.cos(s / 4.7 + 0.4)
+
+
+def _render(phi_deg: float, c: float, tilt: float = 0.0) -> torch.Tensor:
+    """(1, H, W) float64 view of the cylinder at angle phi, rendered analytically."""
+    x = torch.arange(W, dtype=torch.float64)
+    y = torch.arange(H, dtype=torch.float64)[:, None]
+    u = ((x - c) / R).clamp(-1, 1)
+    psi = torch.asin(u) - math.radians(phi_deg)
+    img = _texture(psi, y + tilt * R * torch.sqrt(1 - u**2))
+    return torch.where((x - c).abs() < R, img, torch.full((), BG, dtype=torch.float64))[None]
+
+
+def _cylinder_correspondence(alpha: float, c: float, tilt: float = 0.0) -> Correspondence:
+    """(1, H, W) exact correspondences; valid where the point is on the cylinder and seen
+    by both views. The background moves as the plane Z = 0 through the axis."""
+    al = math.radians(alpha)
+    x = torch.arange(W, dtype=torch.float64).expand(H, W)
+    on = (x - c).abs() < R
+    psi = torch.asin(((x - c) / R).clamp(-1, 1))  # angle in the frame of the view itself
+    d12 = torch.where(on, c + R * torch.sin(psi + al) - x, (x - c) * (math.cos(al) - 1))
+    d21 = torch.where(on, c + R * torch.sin(psi - al) - x, (x - c) * (1 / math.cos(al) - 1))
+    seen_in_2 = on & (torch.cos(psi + al) > 0)
+    seen_in_1 = on & (torch.cos(psi - al) > 0)
+    dy = -tilt * R * (torch.cos(psi + al) - torch.cos(psi))
+    return Correspondence(d12[None], d21[None], seen_in_2[None], seen_in_1[None], dy[None] if tilt else None)
+
+
+def _inner(c: float, rows: int = 0) -> torch.Tensor:
+    """(H, W) pixels on the cylinder away from its silhouette (|x - c| < 0.8 R)."""
+    x = torch.arange(W, dtype=torch.float64)
+    inner = ((x - c).abs() < 0.8 * R).expand(H, W).clone()
+    if rows:
+        inner[:rows], inner[-rows:] = False, False
+    return inner
+
+
+def _assert_matches_rendering(out: torch.Tensor, thetas: list[float], c: float, tilt: float = 0.0) -> None:
+    """``out`` (T, 1, H, W) against the analytic views: mean error < 1 % of the intensity
+    range, max < 4 %, away from the silhouette (the paper: equal except near occlusions)."""
+    inner = _inner(c, rows=3 if tilt else 0)
+    for view, theta in zip(out, thetas, strict=True):
+        ref = _render(theta, c, tilt)
+        span = float(ref[0][inner].max() - ref[0][inner].min())
+        err = (view.double() - ref).abs()[0][inner]
+        assert float(err.mean()) < 0.01 * span, f"theta={theta}: mean error {float(err.mean()):.4f}"
+        assert float(err.max()) < 0.04 * span, f"theta={theta}: max error {float(err.max()):.4f}"
+
+
+@pytest.mark.parametrize("c", [(W - 1) / 2, 20.0])
+def test_seed_angles_reproduce_seed_views(c: float, dtype: torch.dtype) -> None:
+    center = None if c == (W - 1) / 2 else c
+    view1, view2 = _render(0.0, c).to(dtype), _render(ALPHA, c).to(dtype)
+    corr = _cylinder_correspondence(ALPHA, c).to(dtype=dtype)
+    warp = NovelViewWarp(ALPHA, center)
+    exact = dict(atol=1e-12, rtol=0) if dtype == torch.float64 else dict(atol=1e-5, rtol=0)
+    out = warp(view1, view2, correspondence=corr, thetas=[0.0, ALPHA])
+    assert out.shape == (2, 1, H, W) and out.dtype == dtype
+    torch.testing.assert_close(out[0], view1, **exact)
+    torch.testing.assert_close(out[1], view2, **exact)
+    torch.testing.assert_close(warp(view1, correspondence=corr, thetas=0.0)[0], view1, **exact)
+
+
+@pytest.mark.parametrize("c", [(W - 1) / 2, 20.0])
+@pytest.mark.parametrize("masks", ["visibility", "consistency"])
+def test_matches_analytic_rendering(c: float, masks: str, dtype: torch.dtype) -> None:
+    """Synthesized views equal the real ones except near occlusions, inside [0, alpha] and out."""
+    center = None if c == (W - 1) / 2 else c
+    corr = _cylinder_correspondence(ALPHA, c)
+    if masks == "consistency":  # let the forward–backward check find the hidden points
+        corr = correspondence_from_disparity(corr.disparity_12, corr.disparity_21)
+    corr = corr.to(dtype=dtype)
+    view1, view2 = _render(0.0, c).to(dtype), _render(ALPHA, c).to(dtype)
+    thetas = [-10.0, 5.0, 10.0, 15.0, 30.0]
+    warp = NovelViewWarp(ALPHA, center)
+    out = warp(view1[None], view2[None], correspondence=corr, thetas=thetas)
+    assert out.shape == (1, len(thetas), 1, H, W) and out.dtype == dtype
+    _assert_matches_rendering(out[0], thetas, c)
+    # View 1 alone sees the inner part of the views from -10 to 15 degrees well away from its
+    # own silhouette (at alpha, the left end of the inner part comes from 1 px off the limb).
+    one = [-10.0, 5.0, 10.0, 15.0]
+    _assert_matches_rendering(warp(view1, correspondence=corr, thetas=one), one, c)
+
+
+def test_seed_angles_need_no_trusted_match(dtype: torch.dtype) -> None:
+    """At theta = 0 (alpha) the map of view 1 (2) is the identity whatever the masks say, so
+    the seed view comes back even where its correspondences are not trusted."""
+    h, w = 4, 12
+    view1, view2 = rand(2, 1, h, w, seed=16, dtype=dtype), rand(2, 1, h, w, seed=17, dtype=dtype)
+    d12 = (4.0 * rand(2, h, w, seed=18) - 2.0).to(dtype)
+    masks = [rand(2, h, w, seed=s) > 0.5 for s in (19, 20)]
+    corr = correspondence_from_disparity(d12, -d12, valid_12=masks[0], valid_21=masks[1])
+    out = NovelViewWarp(ALPHA)(view1, view2, correspondence=corr, thetas=[0.0, ALPHA])
+    torch.testing.assert_close(out[:, 0], view1, atol=1e-6 if dtype == torch.float32 else 1e-12, rtol=0)
+    torch.testing.assert_close(out[:, 1], view2, atol=1e-6 if dtype == torch.float32 else 1e-12, rtol=0)
+
+
+def test_zero_disparity_views_and_foreshortening(dtype: torch.dtype, tol: dict[str, float]) -> None:
+    """Zero disparity is the plane Z = X tan(alpha / 2): theta = 0 and alpha give the seed
+    views whatever they hold, and in between the image is scaled about the axis by a + b."""
+    h, w = 5, 13
+    view1, view2 = rand(2, 3, h, w, seed=1, dtype=dtype), rand(2, 3, h, w, seed=2, dtype=dtype)
+    corr = correspondence_from_disparity(torch.zeros(2, h, w, dtype=dtype))
+    warp = NovelViewWarp(ALPHA)
+    out = warp(view1, view2, correspondence=corr, thetas=[0.0, ALPHA])
+    torch.testing.assert_close(out[:, 0], view1, **tol)
+    torch.testing.assert_close(out[:, 1], view2, **tol)
+    # A ramp p + q (x - c) + r y is sampled exactly by bilinear interpolation, so the novel
+    # view is p + q (x - c) / (a + b) + r y wherever the source is inside the image.
+    c = (w - 1) / 2
+    x = torch.arange(w, dtype=torch.float64)
+    y = torch.arange(h, dtype=torch.float64)[:, None]
+    ramp = (0.5 + 0.05 * (x - c) + 0.01 * y).expand(1, 1, h, w)
+    thetas = [-15.0, 4.0, 10.0, 35.0]
+    a, b = orthographic_coefficients(thetas, ALPHA)
+    corr1 = correspondence_from_disparity(torch.zeros(1, h, w, dtype=dtype))
+    maps = warp.maps(corr1, thetas)
+    out = warp(ramp.to(dtype), ramp.to(dtype), correspondence=corr1, thetas=thetas)[0, :, 0].double()
+    for i in range(len(thetas)):
+        expected = 0.5 + 0.05 * (x - c) / (a[i] + b[i]) + 0.01 * y
+        seen = maps.hit[0, 0, i]
+        assert bool(seen[:, w // 2].all()) and bool((~seen).any() == (float(a[i] + b[i]) < 1))
+        torch.testing.assert_close(out[i][seen], expected.expand(h, w)[seen], **tol)
+
+
+def test_linear_in_the_seed_views(dtype: torch.dtype, tol: dict[str, float]) -> None:
+    """The warp is linear in the images (the paper's A = G·C): weights depend on geometry only."""
+    h, w = 6, 10
+    views = rand(4, 2, 1, h, w, seed=3, dtype=dtype)
+    d12 = 2.0 * rand(2, h, w, seed=4) - 1.0
+    corr = correspondence_from_disparity(d12.to(dtype))
+    warp = NovelViewWarp(12.0)
+    kw = dict(correspondence=corr, thetas=[-4.0, 6.0, 15.0])
+    combo = warp(2.0 * views[0] - 3.0 * views[2], 2.0 * views[1] - 3.0 * views[3], **kw)
+    torch.testing.assert_close(
+        combo, 2.0 * warp(views[0], views[1], **kw) - 3.0 * warp(views[2], views[3], **kw), **tol
+    )
+
+
+# --- the maps ---------------------------------------------------------------------------
+
+
+def test_maps_layout_and_weights(dtype: torch.dtype, device: torch.device) -> None:
+    b, h, w = 2, 5, 11
+    d12 = (3.0 * rand(b, h, w, seed=5) - 1.5).to(device=device, dtype=dtype)
+    corr = correspondence_from_disparity(d12)
+    thetas = [-5.0, 0.0, 7.5, 20.0]
+    maps = NovelViewWarp(15.0).maps(corr, thetas)
+    assert isinstance(maps, WarpMaps) and maps.n_sources == 2 and maps.src_y is None
+    for t in (maps.src_x, maps.weight, maps.hit):
+        assert t.shape == (2, b, len(thetas), h, w) and t.device.type == device.type
+    assert maps.src_x.dtype == maps.weight.dtype == dtype and maps.hit.dtype == torch.bool
+    assert torch.equal(maps.thetas, torch.tensor(thetas, dtype=torch.float64))
+    assert bool(torch.isfinite(maps.src_x).all())  # holes are filled
+    torch.testing.assert_close(maps.weight.sum(0), torch.ones_like(maps.weight[0]))
+    assert bool((maps.weight >= 0).all()) and bool((maps.weight <= 1).all())
+    # Where only one view sees a pixel it is used alone.
+    only1 = maps.hit[0] & ~maps.hit[1]
+    only2 = maps.hit[1] & ~maps.hit[0]
+    assert bool((maps.weight[0][only1] == 1).all()) and bool((maps.weight[1][only2] == 1).all())
+    single = NovelViewWarp(15.0).maps(corr, thetas, n_sources=1)
+    assert single.n_sources == 1 and bool((single.weight == 1).all())
+    assert torch.equal(single.src_x[0], maps.src_x[0])
+    # apply_maps with the precomputed maps is forward().
+    views = rand(2, b, 3, h, w, seed=6, dtype=dtype, device=device)
+    torch.testing.assert_close(
+        NovelViewWarp.apply_maps(maps, views),
+        NovelViewWarp(15.0)(views[0], views[1], correspondence=corr, thetas=thetas),
+        atol=0,
+        rtol=0,
+    )
+
+
+def test_no_correspondence_moves_as_plane_through_axis() -> None:
+    """With no trusted match anywhere each view moves as the plane Z = 0: a view-1 pixel at
+    X lands at c + X cos(theta), a view-2 pixel at c + X cos(theta) / cos(alpha)."""
+    h, w = 3, 11
+    corr = correspondence_from_disparity(
+        torch.zeros(1, h, w, dtype=torch.float64),
+        valid_12=torch.zeros(1, h, w),
+        valid_21=torch.zeros(1, h, w),
+    )
+    thetas = [-25.0, 8.0, 30.0]
+    maps = NovelViewWarp(ALPHA).maps(corr, thetas)
+    assert not bool(maps.hit.any())
+    x = torch.arange(w, dtype=torch.float64) - (w - 1) / 2
+    for i, theta in enumerate(thetas):
+        th, al = math.radians(theta), math.radians(ALPHA)
+        torch.testing.assert_close(maps.src_x[0, 0, i], ((w - 1) / 2 + x / math.cos(th)).expand(h, w))
+        torch.testing.assert_close(
+            maps.src_x[1, 0, i], ((w - 1) / 2 + x * math.cos(al) / math.cos(th)).expand(h, w)
+        )
+        lam = min(max(theta / ALPHA, 0.0), 1.0)  # neither view sees it: weights by angle
+        torch.testing.assert_close(
+            maps.weight[:, 0, i], torch.tensor([1 - lam, lam]).double().view(2, 1, 1).expand(2, h, w)
+        )
+
+
+def _invert_row_map_loop(
+    dst: torch.Tensor, valid: torch.Tensor, depth: torch.Tensor | None, max_stretch: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """invert_row_map written as the docstring says, one segment and one column at a time."""
+    b, t, h, w = dst.shape
+    out = torch.full_like(dst, math.nan)
+    best: dict[tuple[int, int, int, int], tuple[float, float]] = {}
+    for i in range(b):
+        for j in range(t):
+            for r in range(h):
+                f = dst[i, j, r].tolist()
+                v = (valid[i] if valid.ndim == 3 else valid[i, j])[r].tolist()
+                for k in range(w - 1):
+                    length = f[k + 1] - f[k]
+                    if not (v[k] and v[k + 1] and 0 < length <= max_stretch):
+                        continue
+                    for col in range(w):
+                        if not f[k] <= col <= f[k + 1]:
+                            continue
+                        frac = (col - f[k]) / length
+                        src = k + frac
+                        if depth is None:
+                            key = src
+                        else:
+                            d0, d1 = float(depth[i, j, r, k]), float(depth[i, j, r, k + 1])
+                            key = d0 + (d1 - d0) * frac
+                        best[i, j, r, col] = max(best.get((i, j, r, col), (-math.inf, -math.inf)), (key, src))
+    hit = torch.zeros(dst.shape, dtype=torch.bool)
+    for idx, (_, src) in best.items():
+        out[idx] = src
+        hit[idx] = True
+    return out, hit
+
+
+def _check_inverse(
+    dst: torch.Tensor, valid: torch.Tensor, depth: torch.Tensor | None, stretch: float
+) -> None:
+    src, hit = invert_row_map(dst, valid, depth, stretch)
+    ref_src, ref_hit = _invert_row_map_loop(dst, valid, depth, stretch)
+    assert torch.equal(hit, ref_hit)
+    assert bool(torch.isnan(src[~hit]).all())
+    torch.testing.assert_close(src[hit], ref_src[hit], atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("stretch", [math.inf, 1.5])
+def test_invert_row_map_monotone(stretch: float) -> None:
+    b, t, h, w = 2, 2, 3, 12
+    steps = 0.3 + 1.5 * rand(b, t, h, w, seed=7)  # increasing, some segments longer than 1.5
+    dst = steps.cumsum(-1) - 3.0  # starts left of the image, may end right of it
+    valid = rand(b, h, w, seed=8) > 0.15
+    _check_inverse(dst, valid, None, stretch)
+    _check_inverse(dst, rand(b, t, h, w, seed=15) > 0.15, None, stretch)  # a mask per angle
+    src, hit = invert_row_map(dst, torch.ones_like(valid), None)
+    # Where it hits, the inverse is a true inverse of the piecewise-linear forward map.
+    cols = torch.arange(w, dtype=torch.float64).expand_as(dst)
+    k = src.floor().clamp(max=w - 2).long()
+    frac = src - k
+    fwd = torch.where(
+        hit,
+        dst.gather(-1, k.clamp(min=0)) * (1 - frac) + dst.gather(-1, (k + 1).clamp(0, w - 1)) * frac,
+        cols,
+    )
+    torch.testing.assert_close(fwd[hit], cols[hit], atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("use_depth", [True, False])
+def test_invert_row_map_fold_picks_nearest(use_depth: bool) -> None:
+    """A map that folds back (x - 2.4 sin x): the reversed segments are dropped and where
+    the forward ones overlap, the largest depth (or, without depth, source x) wins."""
+    b, t, h, w = 1, 2, 4, 16
+    x = torch.arange(w, dtype=torch.float64)
+    phase = rand(b, t, h, 1, seed=9) * 6
+    dst = x + 2.4 * torch.sin(0.9 * x + phase)
+    depth = rand(b, t, h, w, seed=10) if use_depth else None
+    valid = torch.ones(b, h, w, dtype=torch.bool)
+    _check_inverse(dst, valid, depth, math.inf)
+    _check_inverse(dst, valid, depth, 2.0)
+    if use_depth:
+        # Raising a segment's depth above everything makes it win every column it covers.
+        k = 5
+        depth2 = depth.clone()
+        depth2[..., k : k + 2] = 10.0
+        src, _ = invert_row_map(dst, valid, depth2)
+        lo, hi = dst[..., k], dst[..., k + 1]
+        cols = x.expand_as(dst)
+        covered = (cols >= lo[..., None]) & (cols <= hi[..., None]) & (hi > lo)[..., None]
+        assert bool(covered.any())
+        assert bool(((src[covered] >= k) & (src[covered] <= k + 1)).all())
+
+
+def test_invert_row_map_max_stretch_is_inclusive() -> None:
+    dst = torch.tensor([0.0, 2.0, 4.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0], dtype=torch.float64).expand(
+        1, 1, 1, 9
+    )
+    src, hit = invert_row_map(dst, torch.ones(1, 1, 9, dtype=torch.bool), None, max_stretch=2.0)
+    # Segments of length 2 are surface, the 3 px jump from 4 to 7 is not.
+    assert hit[0, 0, 0].tolist() == [True, True, True, True, True, False, False, True, True]
+    torch.testing.assert_close(src[0, 0, 0, :5], torch.tensor([0.0, 0.5, 1.0, 1.5, 2.0], dtype=torch.float64))
+    torch.testing.assert_close(src[0, 0, 0, 7:], torch.tensor([3.0, 4.0], dtype=torch.float64))
+
+
+def test_invert_row_map_no_segment() -> None:
+    dst = torch.arange(6, dtype=torch.float64).flip(-1).expand(1, 1, 2, 6)  # all reversed
+    src, hit = invert_row_map(dst, torch.ones(1, 2, 6, dtype=torch.bool), None)
+    assert not bool(hit.any()) and bool(torch.isnan(src).all())
+    src, hit = invert_row_map(torch.zeros(1, 1, 2, 1), torch.ones(1, 2, 1, dtype=torch.bool), None)
+    assert src.shape == (1, 1, 2, 1) and not bool(hit.any())
+
+
+def _fill_row_holes_loop(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
+    out = src.clone()
+    w = src.shape[-1]
+    for idx in itertools.product(*map(range, src.shape[:-1])):
+        hits = [k for k in range(w) if hit[idx][k]]
+        for j in range(w):
+            if hit[idx][j]:
+                continue
+            prev = [k for k in hits if k < j]
+            nxt = [k for k in hits if k > j]
+            s, f = src[idx], fallback[idx]
+            if prev and nxt:
+                p, n = prev[-1], nxt[0]
+                out[idx][j] = s[p] + (s[n] - s[p]) * (j - p) / (n - p)
+            elif prev:
+                out[idx][j] = f[j] + s[prev[-1]] - f[prev[-1]]
+            elif nxt:
+                out[idx][j] = f[j] + s[nxt[0]] - f[nxt[0]]
+            else:
+                out[idx][j] = f[j]
+    return out
+
+
+def test_fill_row_holes() -> None:
+    shape = (2, 3, 4, 9)
+    hit = rand(*shape, seed=11) < 0.4
+    hit[0, 0, 0] = False  # an empty row
+    hit[0, 0, 1] = torch.tensor([False, False, True, False, False, True, False, False, False])
+    src = torch.where(hit, 10 * rand(*shape, seed=12), torch.full(shape, math.nan, dtype=torch.float64))
+    fallback = 3.0 * torch.arange(9, dtype=torch.float64) + rand(*shape, seed=13)
+    filled = fill_row_holes(src, hit, fallback)
+    assert bool(torch.isfinite(filled).all())  # the NaN of the non-hits never leaks
+    torch.testing.assert_close(filled, _fill_row_holes_loop(src, hit, fallback), atol=1e-12, rtol=0)
+    assert torch.equal(filled[hit], src[hit])
+    assert torch.equal(filled[0, 0, 0], fallback[0, 0, 0])
+    row, s, f = filled[0, 0, 1], src[0, 0, 1], fallback[0, 0, 1]
+    torch.testing.assert_close(
+        row[3:5], s[2] + (s[5] - s[2]) * torch.tensor([1 / 3, 2 / 3], dtype=torch.float64)
+    )
+    torch.testing.assert_close(row[6:], f[6:] + (s[5] - f[5]))  # beyond the last hit
+    torch.testing.assert_close(row[:2], f[:2] + (s[2] - f[2]))  # before the first hit
+
+
+# --- occlusions: a strip in front of a background plane ---------------------------------
+
+ZF, ZB, HALF = 8.0, -6.0, 7.0  # strip depth, background depth, strip half-width
+HO, WO = 12, 64
+
+
+def _layers(phi_deg: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Per column of the view at phi: the strip's X, the background's X, and strip-in-front."""
+    phi = math.radians(phi_deg)
+    x = torch.arange(WO, dtype=torch.float64) - (WO - 1) / 2
+    xf = (x - ZF * math.sin(phi)) / math.cos(phi)
+    xb = (x - ZB * math.sin(phi)) / math.cos(phi)
+    return xf, xb, xf.abs() <= HALF
+
+
+def _render_layers(phi_deg: float) -> torch.Tensor:
+    xf, xb, front = _layers(phi_deg)
+    y = torch.arange(HO, dtype=torch.float64)[:, None]
+    strip = 0.6 + 0.3 * torch.sin(xf / 1.7) * torch.cos(y / 2.9)
+    back = 0.35 + 0.25 * torch.cos(xb / 2.3 + 0.5) * torch.sin(y / 3.3 + 1)
+    return torch.where(front, strip, back)[None]
+
+
+def test_zbuffer_keeps_the_nearer_surface() -> None:
+    """View 1 alone, every in-image match trusted: at theta = alpha the background the strip
+    covers maps onto the strip's pixels too, and the depth test must keep the strip."""
+    xf, xb, front = _layers(0.0)
+    big_x, big_z = torch.where(front, xf, xb), torch.where(front, ZF, ZB)
+    al = math.radians(ALPHA)
+    d12 = (big_x * math.cos(al) + big_z * math.sin(al) - big_x).expand(HO, WO)[None]
+    cols = torch.arange(WO, dtype=torch.float64)
+    valid = ((cols + d12) >= 0) & ((cols + d12) <= WO - 1)
+    corr = Correspondence(d12, -d12, valid, valid)
+    view1, ref = _render_layers(0.0), _render_layers(ALPHA)
+    strip = _layers(ALPHA)[2].clone()
+    strip[[0, -1]] = False
+    strip = strip & ~torch.roll(~strip, 1) & ~torch.roll(~strip, -1)  # 1 px off its edges
+    errors = {}
+    for sign in (1, -1):
+        out = NovelViewWarp(ALPHA, depth_sign=sign)(view1, correspondence=corr, thetas=ALPHA)[0]
+        errors[sign] = float((out - ref)[0][:, strip].abs().mean())
+    assert errors[1] < 0.01
+    assert errors[-1] > 0.05  # the wrong depth sign shows the background through the strip
+
+
+# --- a tilted camera --------------------------------------------------------------------
+
+ELEVATION = 30.0
+
+
+def test_elevation_gives_2d_maps() -> None:
+    corr = correspondence_from_disparity(2.0 * rand(2, 5, 8, seed=14) - 1.0)
+    assert NovelViewWarp(ALPHA).maps(corr, [3.0]).src_y is None
+    maps = NovelViewWarp(ALPHA, elevation=ELEVATION).maps(corr, [3.0, 9.0])
+    assert maps.src_y is not None and maps.src_y.shape == maps.src_x.shape == (2, 2, 2, 5, 8)
+    assert maps.src_y.dtype == torch.float64 and bool(torch.isfinite(maps.src_y).all())
+    assert NovelViewWarp(ALPHA, elevation=ELEVATION).maps(corr, [3.0], n_sources=1).src_y.shape == (
+        1,
+        2,
+        1,
+        5,
+        8,
+    )
+    # Zero disparity at theta = 0: nothing moves, also not vertically.
+    zero = correspondence_from_disparity(torch.zeros(1, 5, 8, dtype=torch.float64))
+    maps = NovelViewWarp(ALPHA, elevation=ELEVATION).maps(zero, [0.0])
+    rows = torch.arange(5, dtype=torch.float64)[:, None].expand(5, 8)
+    torch.testing.assert_close(maps.src_y[0, 0, 0], rows)
+
+
+def test_tilted_pair_reproduced() -> None:
+    """A camera looking down on the cylinder: rows move with depth. The 2D warp gives view 2
+    back at theta = alpha, matches the rendering in between, and beats the row-only warp
+    when extrapolating; estimate_elevation finds the tilt from the same correspondences."""
+    c, tilt = (W - 1) / 2, math.sin(math.radians(ELEVATION))
+    view1, view2 = _render(0.0, c, tilt), _render(ALPHA, c, tilt)
+    corr = _cylinder_correspondence(ALPHA, c, tilt)
+    on = ((torch.arange(W) - c).abs() < R).expand(1, H, W)
+    torch.testing.assert_close(
+        estimate_elevation(corr, ALPHA, mask=on), torch.tensor([ELEVATION], dtype=torch.float64)
+    )
+    warp = NovelViewWarp(ALPHA, elevation=ELEVATION)
+    out = warp(view1, view2, correspondence=corr, thetas=[0.0, ALPHA])
+    torch.testing.assert_close(out[0], view1, atol=1e-12, rtol=0)
+    torch.testing.assert_close(out[1], view2, atol=1e-12, rtol=0)
+    thetas = [-10.0, 5.0, 10.0, 15.0, 30.0]
+    out = warp(view1, view2, correspondence=corr, thetas=thetas)
+    _assert_matches_rendering(out, thetas, c, tilt)
+    flat = NovelViewWarp(ALPHA)(view1, view2, correspondence=corr, thetas=[-10.0, 30.0])
+    inner = _inner(c, rows=3)
+    for i, theta in enumerate([-10.0, 30.0]):
+        ref = _render(theta, c, tilt)[0]
+        err_2d = float((out[-1 if theta > 0 else 0, 0] - ref)[inner].abs().mean())
+        err_rows = float((flat[i, 0] - ref)[inner].abs().mean())
+        assert err_2d < 0.5 * err_rows, (theta, err_2d, err_rows)
+
+
+# --- module invariants ------------------------------------------------------------------
+
+
+def _small_problem(
+    b: int, c: int, h: int, w: int, dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor, Correspondence]:
+    view1 = rand(b, c, h, w, seed=20, dtype=dtype, device=device)
+    view2 = rand(b, c, h, w, seed=21, dtype=dtype, device=device)
+    d12 = 3.0 * rand(b, h, w, seed=22) - 1.5
+    return view1, view2, correspondence_from_disparity(d12.to(dtype))
+
+
+@pytest.mark.parametrize("elevation", [0.0, 25.0])
+@pytest.mark.parametrize("two_views", [True, False])
+def test_check_module(
+    elevation: float, two_views: bool, dtype: torch.dtype, device: torch.device, tol: dict[str, float]
+) -> None:
+    view1, view2, corr = _small_problem(3, 2, 6, 9, dtype, device)
+    warp = NovelViewWarp(12.0, elevation=elevation).to(device)
+    inputs = (view1, view2 if two_views else None)
+    kwargs = dict(correspondence=corr, thetas=[-5.0, 2.5, 12.0, 20.0])
+    check_module(warp, inputs, kwargs, batched_kwargs=("correspondence",), tol=tol)
+
+
+def test_unbatched_input(dtype: torch.dtype, device: torch.device) -> None:
+    view1, view2, corr = _small_problem(1, 3, 5, 7, dtype, device)
+    warp = NovelViewWarp(-15.0)
+    batched = warp(view1, view2, correspondence=corr, thetas=[-3.0, 4.0])
+    single = warp(view1[0], view2[0], correspondence=corr, thetas=[-3.0, 4.0])
+    assert single.shape == (2, 3, 5, 7) and single.dtype == dtype and single.device.type == device.type
+    torch.testing.assert_close(single, batched[0], atol=0, rtol=0)
+
+
+def test_correspondence_dtype_does_not_set_output_dtype(dtype: torch.dtype) -> None:
+    view1, view2, corr = _small_problem(2, 1, 5, 7, dtype, torch.device("cpu"))
+    other = torch.float64 if dtype == torch.float32 else torch.float32
+    out = NovelViewWarp(10.0)(view1, view2, correspondence=corr.to(dtype=other), thetas=[4.0])
+    assert out.dtype == dtype
+
+
+def test_gradcheck() -> None:
+    view1, view2, corr = _small_problem(1, 1, 5, 6, torch.float64, torch.device("cpu"))
+    warp = NovelViewWarp(10.0)
+    view1.requires_grad_(True)
+    view2.requires_grad_(True)
+
+    def fn(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        return warp(a, b, correspondence=corr, thetas=[3.0, 14.0])
+
+    assert torch.autograd.gradcheck(fn, (view1, view2))
+    assert torch.autograd.gradcheck(lambda a: warp(a, correspondence=corr, thetas=[-2.0, 6.0]), (view1,))
+
+
+# --- errors -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        (dict(alpha=0.0), ValueError, r"alpha=0\.0 must not be a multiple of 180"),
+        (dict(alpha=-180), ValueError, r"alpha=-180\.0 must not be a multiple of 180"),
+        (dict(alpha=math.nan), ValueError, r"alpha=nan must be finite"),
+        (dict(alpha="10"), TypeError, r"alpha must be a number of degrees, got str"),
+        (
+            dict(alpha=10.0, elevation=95.0),
+            ValueError,
+            r"elevation=95\.0 must be an angle in degrees in \(-90, 90\)",
+        ),
+        (dict(alpha=10.0, elevation=-90), ValueError, r"elevation=-90 must be an angle"),
+        (dict(alpha=10.0, elevation=math.nan), ValueError, r"elevation=nan must be an angle"),
+        (dict(alpha=10.0, max_stretch=0), ValueError, r"max_stretch=0 must be positive"),
+        (dict(alpha=10.0, max_stretch=-1.0), ValueError, r"max_stretch=-1\.0 must be positive"),
+        (dict(alpha=10.0, max_stretch=math.nan), ValueError, r"max_stretch=nan must be positive"),
+        (dict(alpha=10.0, depth_sign=2), ValueError, r"depth_sign must be 'auto', 1 or -1, got 2"),
+        (dict(alpha=10.0, depth_sign="up"), ValueError, r"depth_sign must be 'auto', 1 or -1, got 'up'"),
+        (dict(alpha=10.0, center=math.inf), ValueError, r"center=inf must be a finite column"),
+    ],
+)
+def test_constructor_errors(kwargs: dict, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        NovelViewWarp(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs", [dict(center="a"), dict(elevation="5"), dict(depth_sign=True)], ids=str)
+def test_constructor_type_errors(kwargs: dict) -> None:
+    name = next(iter(kwargs))
+    with pytest.raises(TypeError, match=name):
+        NovelViewWarp(10.0, **kwargs)
+
+
+def test_view2_dtype_mismatch() -> None:
+    view1, view2, corr = _small_problem(1, 1, 5, 7, torch.float64, torch.device("cpu"))
+    with pytest.raises(TypeError, match=r"view2 must have the dtype of view1 \(torch.float32\)"):
+        NovelViewWarp(10.0)(view1.float(), view2, correspondence=corr, thetas=[4.0])
+
+
+def test_forward_errors() -> None:
+    view1, view2, corr = _small_problem(2, 1, 5, 7, torch.float64, torch.device("cpu"))
+    warp = NovelViewWarp(10.0)
+    with pytest.raises(ValueError, match=r"thetas must hold at least one angle"):
+        warp(view1, view2, correspondence=corr, thetas=[])
+    with pytest.raises(ValueError, match=r"thetas must be finite"):
+        warp(view1, view2, correspondence=corr, thetas=[1.0, math.nan])
+    with pytest.raises(TypeError, match=r"thetas must be a number, a sequence of numbers or a tensor"):
+        warp(view1, view2, correspondence=corr, thetas="5")
+    with pytest.raises(
+        ValueError, match=r"view2 must have the shape of view1 \(2, 1, 5, 7\), got \(2, 1, 5, 6\)"
+    ):
+        warp(view1, view2[..., :6], correspondence=corr, thetas=[1.0])
+    with pytest.raises(TypeError, match=r"view2 must have a floating dtype"):
+        warp(view1, view2.long(), correspondence=corr, thetas=[1.0])
+    with pytest.raises(
+        ValueError, match=r"correspondence must have shape \(B, H, W\) = \(2, 5, 6\).*got \(2, 5, 7\)"
+    ):
+        warp(view1[..., :6], view2[..., :6], correspondence=corr, thetas=[1.0])
+    with pytest.raises(ValueError, match=r"correspondence must have shape \(B, H, W\) = \(1, 5, 7\)"):
+        warp(view1[0], view2[0], correspondence=corr, thetas=[1.0])
+    with pytest.raises(TypeError, match=r"view1 must have a floating dtype, got torch.int64"):
+        warp(view1.long(), correspondence=corr, thetas=[1.0])
+    with pytest.raises(TypeError, match=r"view1 must be a torch.Tensor"):
+        warp(view1.numpy(), correspondence=corr, thetas=[1.0])
+    with pytest.raises(
+        ValueError, match=r"view1 must have shape \(B, C, H, W\) or \(C, H, W\), got shape \(5, 7\)"
+    ):
+        warp(view1[0, 0], correspondence=corr, thetas=[1.0])
+    with pytest.raises(ValueError, match=r"n_sources must be 1 or 2, got 3"):
+        warp.maps(corr, [1.0], n_sources=3)
+
+
+def test_repr() -> None:
+    text = repr(NovelViewWarp(12.5, 30.0, elevation=10.0, max_stretch=2.0))
+    assert text == "NovelViewWarp(alpha=12.5, center=30.0, elevation=10.0, max_stretch=2.0, blend='linear')"
+
+
+def test_blend_nearest_takes_the_nearer_seed_alone() -> None:
+    """``blend="nearest"``: where both seeds see a pixel, seed 1 up to α/2 and seed 2
+    beyond (weights 0/1); ``"linear"``: 1 − θ/α and θ/α. One-view pixels are alike."""
+    _, _, corr = _small_problem(1, 1, 6, 9, torch.float64, torch.device("cpu"))
+    thetas = [-3.0, 2.0, 5.0, 7.0, 13.0]
+    near = NovelViewWarp(10.0, blend="nearest").maps(corr, thetas)
+    lin = NovelViewWarp(10.0).maps(corr, thetas)
+    both = near.hit[0] & near.hit[1]
+    want_w1 = torch.tensor([1.0, 1.0, 1.0, 0.0, 0.0], dtype=torch.float64).view(1, -1, 1, 1).expand_as(both)
+    assert bool(both.any())
+    torch.testing.assert_close(near.weight[0][both], want_w1[both])
+    lam = (torch.tensor(thetas, dtype=torch.float64) / 10.0).clamp(0, 1).view(1, -1, 1, 1).expand_as(both)
+    torch.testing.assert_close(lin.weight[0][both], (1 - lam)[both])
+    one = near.hit[0] ^ near.hit[1]
+    torch.testing.assert_close(near.weight[0][one], lin.weight[0][one])
+    with pytest.raises(ValueError, match=r"blend must be one of \('linear', 'nearest'\), got 'max'"):
+        NovelViewWarp(10.0, blend="max")
+
+
+def test_forward_with_masks_is_apply_maps_with_masks() -> None:
+    view1, view2, corr = _small_problem(2, 2, 6, 9, torch.float64, torch.device("cpu"))
+    masks = torch.rand(2, 2, 6, 9, generator=torch.Generator().manual_seed(1)) > 0.3
+    warp = NovelViewWarp(10.0)
+    out = warp(view1, view2, correspondence=corr, thetas=[-2.0, 4.0], masks=masks)
+    ref = warp.apply_maps(warp.maps(corr, [-2.0, 4.0]), torch.stack([view1, view2]), masks)
+    torch.testing.assert_close(out, ref)
+    v1, v2, c1 = _small_problem(1, 2, 6, 9, torch.float64, torch.device("cpu"))
+    single = warp(v1[0], v2[0], correspondence=c1, thetas=[4.0], masks=masks[:, 0])
+    batched = warp(v1, v2, correspondence=c1, thetas=[4.0], masks=masks[:, :1])
+    torch.testing.assert_close(single, batched[0])
+    with pytest.raises(
+        ValueError, match=r"masks must have shape \(2, 2, 6, 9\) \(S, \[B,\] H, W\), got \(2, 6, 9\)"
+    ):
+        warp(view1, view2, correspondence=corr, thetas=[4.0], masks=masks[:, 0])
+    with pytest.raises(TypeError, match="masks must be a tensor, got list"):
+        warp(view1, view2, correspondence=corr, thetas=[4.0], masks=[1])
+
+
+def test_thetas_beyond_a_quarter_turn_are_refused() -> None:
+    view1, view2, corr = _small_problem(1, 1, 5, 7, torch.float64, torch.device("cpu"))
+    with pytest.raises(ValueError, match=r"thetas must lie within \(-90, 90\)"):
+        NovelViewWarp(10.0)(view1, view2, correspondence=corr, thetas=[10.0, 95.0])
+
+
+def test_tilted_maps_differentiate_through_the_correspondence() -> None:
+    """With an elevation the maps are refined by fixed-point sampling; a correspondence
+    that requires grad must still give a graph (the refinement's in-place grid buffer is
+    used only without one)."""
+    d = (
+        torch.rand(8, 10, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 2
+    ).requires_grad_()
+    corr = correspondence_from_disparity(d, -d.detach())
+    view1, view2 = torch.rand(2, 1, 1, 8, 10, dtype=torch.float64)
+    out = NovelViewWarp(10.0, elevation=12.0)(view1, view2, correspondence=corr, thetas=[3.0, -4.0])
+    out.sum().backward()
+    assert d.grad is not None and bool(torch.isfinite(d.grad).all()) and float(d.grad.abs().sum()) > 0
+    with torch.no_grad():  # and the in-place path gives the same views
+        again = NovelViewWarp(10.0, elevation=12.0)(view1, view2, correspondence=corr, thetas=[3.0, -4.0])
+    torch.testing.assert_close(again, out.detach())
+
+
+def test_map_sampler_differentiates_through_its_fields() -> None:
+    """The sampler reuses one grid buffer when nothing is differentiated; with fields that
+    need a gradient every call gets its own grid (grid_sample keeps it for backward)."""
+    fields = torch.rand(1, 2, 2, 8, 8, dtype=torch.float64, requires_grad=True)
+    sample = _sampler(fields)
+    x, y = torch.rand(1, 2, 8, 8, dtype=torch.float64) * 7, torch.rand(1, 2, 8, 8, dtype=torch.float64) * 7
+    (sample(x, y).sum() + sample(x.flip(-1), y).sum()).backward()
+    assert fields.grad is not None and bool(fields.grad.abs().sum() > 0)

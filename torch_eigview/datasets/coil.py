@@ -1,0 +1,244 @@
+"""Loading COIL-style turntable images (``obj{O}__{P}.png``) as tensors.
+
+COIL-20 ("processed") names pose ``P`` by its index (the view at ``5·P`` degrees); COIL-100
+uses the same layout with ``P`` in degrees. :class:`CoilFolder` scans a folder once, reads
+files lazily with ``skimage.io.imread`` and caches the decoded pixels.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import operator
+import os
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from torch_eigview.check import as_angle_tensor
+from torch_eigview.io.images import read_image
+
+__all__ = ["CoilFolder", "parse_object_spec"]
+
+# re.ASCII: ``\d`` alone would also accept non-ASCII digits such as "obj١__0.png".
+_FILE_RE = re.compile(r"obj([0-9]+)__([0-9]+)\.png", re.ASCII)
+_SPEC_RE = re.compile(r"\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?", re.ASCII)
+_POSE_UNITS = ("auto", "index", "degrees")
+_N_INDEX_POSES = 72  # COIL-20: pose indices 0..71, 5 degrees apart
+_ANGLE_TOL = 1e-6  # degrees
+
+
+def parse_object_spec(spec: str) -> list[int]:
+    """Parses an object selection such as ``"1-20"``, ``"1,3,5-7"`` or ``"4"``.
+
+    Args:
+        spec: Comma-separated positive integers or inclusive ranges ``a-b`` with ``a <= b``.
+
+    Returns:
+        The selected object ids, sorted and without duplicates.
+
+    Raises:
+        TypeError: ``spec`` is not a string.
+        ValueError: ``spec`` is empty, malformed, holds 0 or a reversed range.
+    """
+    if not isinstance(spec, str):
+        raise TypeError(f"spec must be a string such as '1-20' or '1,3,5-7', got {type(spec).__name__}")
+    ids: set[int] = set()
+    for token in spec.split(","):
+        m = _SPEC_RE.fullmatch(token)
+        if m is None:
+            raise ValueError(f"spec={spec!r} must look like '1-20' or '1,3,5-7' (bad part {token!r})")
+        lo = int(m.group(1))
+        hi = lo if m.group(2) is None else int(m.group(2))
+        if lo < 1:
+            raise ValueError(f"spec={spec!r} must hold positive object ids, got {lo}")
+        if hi < lo:
+            raise ValueError(f"spec={spec!r} holds the reversed range {lo}-{hi} (must be low-high)")
+        ids.update(range(lo, hi + 1))
+    return sorted(ids)
+
+
+class CoilFolder:
+    """A folder of COIL-style images ``obj{O}__{P}.png``, read lazily and cached.
+
+    Images come back as float tensors ``(C, H, W)`` in ``[0, 1]``: ``uint8`` is divided by
+    255, ``uint16`` by 65535, float images are kept as they are. Grayscale gives ``C = 1``,
+    RGB ``C = 3``; an alpha channel is dropped. Every image must have the shape of the first
+    one, which is read at construction.
+
+    Args:
+        root: The folder; other files in it are ignored.
+        pose_unit: ``"index"`` (COIL-20, pose ``P`` is ``5·P`` degrees), ``"degrees"``
+            (COIL-100, pose ``P`` is ``P`` degrees) or ``"auto"``: ``"degrees"`` when some
+            ``P`` exceeds 71, the largest COIL-20 index, else ``"index"``. A COIL-100 subset
+            whose poses all lie below 72 degrees is thus read as indices; pass the unit then.
+        dtype: Floating dtype of the returned tensors.
+
+    Raises:
+        TypeError: ``root`` is not a path or ``dtype`` is not a floating dtype.
+        ValueError: ``root`` is not a folder or holds no COIL file, ``pose_unit`` is
+            unknown, a pose lies outside ``[0, 360)`` degrees, two files name the same view,
+            or the first image cannot be read.
+    """
+
+    def __init__(
+        self, root: str | os.PathLike[str], *, pose_unit: str = "auto", dtype: torch.dtype = torch.float32
+    ) -> None:
+        if not isinstance(root, (str, os.PathLike)):
+            raise TypeError(f"root must be a str or a path, got {type(root).__name__}")
+        if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
+            raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
+        if not isinstance(pose_unit, str) or pose_unit not in _POSE_UNITS:
+            raise ValueError(f"pose_unit must be one of {_POSE_UNITS}, got {pose_unit!r}")
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise ValueError(f"root={str(self.root)!r} must be an existing directory")
+        found = [
+            (int(m.group(1)), int(m.group(2)), p)
+            for p in self.root.iterdir()
+            if (m := _FILE_RE.fullmatch(p.name)) is not None and p.is_file()
+        ]
+        if not found:
+            raise ValueError(f"root={str(self.root)!r} holds no COIL files (obj{{O}}__{{P}}.png)")
+        if pose_unit == "auto":
+            pose_unit = "degrees" if any(p >= _N_INDEX_POSES for _, p, _ in found) else "index"
+        self.pose_unit = pose_unit
+        self.dtype = dtype
+        step, limit = (5.0, _N_INDEX_POSES) if pose_unit == "index" else (1.0, 360)
+        self._files: dict[int, dict[float, Path]] = {}
+        for obj, p, path in sorted(found):
+            if p >= limit:
+                raise ValueError(
+                    f"pose_unit={pose_unit!r} needs P in 0..{limit - 1} (angles in [0, 360)), got {path}"
+                )
+            views = self._files.setdefault(obj, {})
+            if step * p in views:
+                raise ValueError(f"{path} and {views[step * p]} name the same view (object {obj})")
+            views[step * p] = path
+        first_path = min(found)[2]
+        first = _decode(first_path)
+        c, h, w = first.shape
+        self.image_shape: tuple[int, int, int] = (c, h, w)
+        self._cache: dict[Path, np.ndarray] = {first_path: first}
+
+    @property
+    def objects(self) -> list[int]:
+        """The object ids present, sorted."""
+        return sorted(self._files)
+
+    def __len__(self) -> int:
+        return sum(len(views) for views in self._files.values())
+
+    def __repr__(self) -> str:
+        return (
+            f"CoilFolder(root={str(self.root)!r}, objects={len(self._files)}, files={len(self)}, "
+            f"pose_unit={self.pose_unit!r}, image_shape={self.image_shape})"
+        )
+
+    def poses(self, obj: int) -> list[float]:
+        """The available pose angles of object ``obj`` in degrees, sorted, in ``[0, 360)``."""
+        return sorted(self._views(obj))
+
+    def image(self, obj: int, degrees: float) -> torch.Tensor:
+        """Returns the view of object ``obj`` at ``degrees`` (taken modulo 360).
+
+        Args:
+            obj: Object id.
+            degrees: Turntable angle; must match an available pose to within 1e-6 degrees.
+
+        Returns:
+            A new tensor ``(C, H, W)`` of ``self.dtype``, values in ``[0, 1]``.
+
+        Raises:
+            TypeError: ``obj`` is not an int or ``degrees`` not a real number.
+            ValueError: Unknown object, no file at that angle, or an invalid file.
+        """
+        if isinstance(degrees, bool) or not isinstance(degrees, numbers.Real):
+            raise TypeError(f"degrees must be a number, got {type(degrees).__name__}")
+        if not math.isfinite(degrees):
+            raise ValueError(f"degrees={degrees} must be finite")
+        return self._to_tensor(self._read(self._find(obj, float(degrees))))
+
+    def images(self, obj: int, degrees_list: Sequence[float] | torch.Tensor) -> torch.Tensor:
+        """Returns the views of object ``obj`` at each angle of ``degrees_list`` ``(T,)``.
+
+        Returns:
+            A tensor ``(T, C, H, W)`` of ``self.dtype``.
+        """
+        angles = as_angle_tensor(degrees_list, "degrees_list").tolist()
+        return torch.stack([self._to_tensor(self._read(self._find(obj, a))) for a in angles])
+
+    def load_all(
+        self, objects: Iterable[int] | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Loads every pose, sorted by angle, of ``objects`` in their order (default: all, sorted).
+
+        Returns:
+            ``images`` ``(M, C, H, W)``, ``labels`` ``(M,)`` int64 object ids and ``poses``
+            ``(M,)`` float64 degrees.
+        """
+        objs = self.objects if objects is None else list(objects)
+        if not objs:
+            raise ValueError("objects must name at least one object, got an empty collection")
+        labels, poses, imgs = [], [], []
+        for obj in objs:
+            for deg, path in sorted(self._views(obj).items()):
+                labels.append(obj)
+                poses.append(deg)
+                imgs.append(self._to_tensor(self._read(path)))
+        labels_t, poses_t = torch.tensor(labels, dtype=torch.int64), torch.tensor(poses, dtype=torch.float64)
+        return torch.stack(imgs), labels_t, poses_t
+
+    def _views(self, obj: int) -> dict[float, Path]:
+        try:
+            key = operator.index(obj)
+        except TypeError:
+            raise TypeError(f"obj must be an int object id, got {type(obj).__name__}") from None
+        if key not in self._files:
+            raise ValueError(f"obj={obj} is not in {self.root} (objects: {self.objects})")
+        return self._files[key]
+
+    def _find(self, obj: int, degrees: float) -> Path:
+        views = self._views(obj)
+        wrapped = degrees % 360.0
+        for deg, path in views.items():
+            diff = abs(wrapped - deg)
+            if min(diff, 360.0 - diff) <= _ANGLE_TOL:  # circular, so 359.9999999 finds 0
+                return path
+        have = [f"{v:g}" for v in sorted(views)]
+        if len(have) > 8:
+            have = [*have[:3], "...", *have[-2:]]
+        raise ValueError(
+            f"obj={obj} has no image at degrees={degrees!r} ({wrapped!r} mod 360); "
+            f"available: [{', '.join(have)}] ({len(views)} poses)"
+        )
+
+    def _read(self, path: Path) -> np.ndarray:
+        cached = self._cache.get(path)
+        if cached is None:
+            cached = _decode(path)
+            if cached.shape != self.image_shape:
+                raise ValueError(
+                    f"image {path} must have shape (C, H, W)={self.image_shape} like the first image, "
+                    f"got {cached.shape}"
+                )
+            self._cache[path] = cached
+        return cached
+
+    def _to_tensor(self, arr: np.ndarray) -> torch.Tensor:
+        # Cached arrays keep their file dtype (uint8 is 4x smaller than float32); converting
+        # here also hands out a fresh tensor, so callers cannot alter the cache in place.
+        # Work in float32 at least: 65535 overflows float16.
+        work = np.float64 if self.dtype == torch.float64 else np.float32
+        t = torch.from_numpy(arr.astype(work))
+        if arr.dtype.kind == "u":
+            t /= float(np.iinfo(arr.dtype).max)
+        return t.to(self.dtype)
+
+
+def _decode(path: Path) -> np.ndarray:
+    """Reads one file as a checked ``(C, H, W)`` array of its own dtype (alpha dropped)."""
+    return read_image(path)

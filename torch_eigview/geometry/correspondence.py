@@ -1,0 +1,200 @@
+"""Dense horizontal correspondences between two seed views.
+
+Convention: images are (C, H, W); x is the column, y the row; pixel centres at integers.
+For the orthographic camera rotating about the vertical axis a point keeps its row, so
+a correspondence is a horizontal disparity: ``x2 = x1 + disparity_12[y, x1]`` maps a
+pixel of view 1 to view 2, and ``x1 = x2 + disparity_21[y, x2]`` the other way. A pixel
+is valid when the two maps agree (forward–backward consistency). Pixels of one view that
+the other does not see (occlusions) are meant to fail that check; a regularized flow
+(TV-L1) smooths across narrow occlusions, so only part of them do, and the warp's
+z-buffer and two-view blend handle the rest.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from skimage.registration import optical_flow_ilk, optical_flow_tvl1
+
+from torch_eigview.check import check_finite, check_float_tensor, check_ndim
+from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+
+__all__ = ["Correspondence", "correspondence_from_disparity", "estimate_correspondence"]
+
+_METHODS = ("tvl1", "ilk")
+
+
+@dataclass(frozen=True)
+class Correspondence:
+    """Horizontal correspondences between view 1 and view 2, both directions.
+
+    Attributes:
+        disparity_12: (B, H, W), ``x2 = x1 + disparity_12``.
+        disparity_21: (B, H, W), ``x1 = x2 + disparity_21``.
+        valid_12: (B, H, W) bool, view-1 pixels whose match is trusted.
+        valid_21: (B, H, W) bool, view-2 pixels whose match is trusted.
+        vertical_12: (B, H, W) ``y2 - y1`` measured by a 2D flow, or None. The
+            orthographic model does not use it; :func:`torch_eigview.geometry.pose.estimate_elevation`
+            measures a tilted camera from it.
+        vertical_21: (B, H, W) ``y1 - y2`` of view-2 pixels, or None (used by the
+            perspective camera, whose points move in both coordinates).
+    """
+
+    disparity_12: torch.Tensor
+    disparity_21: torch.Tensor
+    valid_12: torch.Tensor
+    valid_21: torch.Tensor
+    vertical_12: torch.Tensor | None = None
+    vertical_21: torch.Tensor | None = None
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """(B, H, W)."""
+        b, h, w = self.disparity_12.shape
+        return b, h, w
+
+    def to(
+        self, device: torch.device | str | None = None, dtype: torch.dtype | None = None
+    ) -> Correspondence:
+        """Moves the disparities (and masks) to ``device``; ``dtype`` applies to disparities only."""
+        return Correspondence(
+            self.disparity_12.to(device=device, dtype=dtype),
+            self.disparity_21.to(device=device, dtype=dtype),
+            self.valid_12.to(device=device),
+            self.valid_21.to(device=device),
+            None if self.vertical_12 is None else self.vertical_12.to(device=device, dtype=dtype),
+            None if self.vertical_21 is None else self.vertical_21.to(device=device, dtype=dtype),
+        )
+
+
+def _sample_rows(values: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """Linear interpolation of ``values`` (B, H, W) along each row at columns ``x`` (B, H, W)."""
+    w = values.shape[-1]
+    xc = torch.nan_to_num(x, nan=-1.0).clamp(0, w - 1)
+    x0 = xc.floor().long().clamp(max=w - 2) if w > 1 else xc.floor().long()
+    t = xc - x0
+    v0 = values.gather(-1, x0)
+    v1 = values.gather(-1, (x0 + 1).clamp(max=w - 1))
+    return v0 * (1 - t) + v1 * t
+
+
+def _consistency(d_ab: torch.Tensor, d_ba: torch.Tensor, threshold: float) -> torch.Tensor:
+    """Pixels of view a whose match in view b maps back to within ``threshold`` pixels."""
+    w = d_ab.shape[-1]
+    cols = torch.arange(w, dtype=d_ab.dtype, device=d_ab.device).expand_as(d_ab)
+    x_b = cols + d_ab
+    inside = (x_b >= 0) & (x_b <= w - 1)  # False for NaN too
+    round_trip = d_ab + _sample_rows(d_ba, x_b)
+    return inside & (round_trip.abs() <= threshold)
+
+
+def correspondence_from_disparity(
+    disparity_12: torch.Tensor,
+    disparity_21: torch.Tensor | None = None,
+    *,
+    valid_12: torch.Tensor | None = None,
+    valid_21: torch.Tensor | None = None,
+    threshold: float = 1.0,
+) -> Correspondence:
+    """Wraps caller-supplied disparities (for example exact ones) as a :class:`Correspondence`.
+
+    Args:
+        disparity_12: (H, W) or (B, H, W), ``x2 = x1 + disparity_12``.
+        disparity_21: same shape, the reverse map; if omitted it is obtained by inverting
+            ``disparity_12`` row by row (valid where the inverse is single-valued).
+        valid_12, valid_21: optional masks; by default the forward–backward check with
+            ``threshold`` pixels decides.
+        threshold: forward–backward tolerance in pixels.
+    """
+    d12 = check_float_tensor(disparity_12, "disparity_12")
+    check_ndim(d12, "disparity_12", (2, 3), "(H, W) or (B, H, W)")
+    check_finite(d12, "disparity_12")
+    if d12.ndim == 2:
+        d12 = d12[None]
+    if disparity_21 is None:
+        d21 = _invert_disparity(d12)
+    else:
+        d21 = check_float_tensor(disparity_21, "disparity_21")
+        d21 = d21[None] if d21.ndim == 2 else d21
+        if d21.shape != d12.shape:
+            raise ValueError(
+                f"disparity_21 must have the shape of disparity_12 {tuple(d12.shape)}, got {tuple(d21.shape)}"
+            )
+        check_finite(d21, "disparity_21")
+    v12 = _consistency(d12, d21, threshold) if valid_12 is None else valid_12.reshape(d12.shape).bool()
+    v21 = _consistency(d21, d12, threshold) if valid_21 is None else valid_21.reshape(d12.shape).bool()
+    return Correspondence(d12, d21, v12, v21)
+
+
+def _invert_disparity(d12: torch.Tensor) -> torch.Tensor:
+    """Reverse disparity by inverting x2(x1) = x1 + d12 along each row (nearest monotone piece)."""
+
+    w = d12.shape[-1]
+    cols = torch.arange(w, dtype=d12.dtype, device=d12.device)
+    x2 = (cols + d12)[:, None]  # (B, 1, H, W)
+    ok = torch.ones_like(d12, dtype=torch.bool)
+    src, hit = invert_row_map(x2, ok, None)
+    src = fill_row_holes(src, hit, cols.expand_as(src))
+    return src[:, 0] - cols
+
+
+def _to_gray_numpy(view: torch.Tensor) -> np.ndarray:
+    return view.detach().to("cpu", torch.float64).mean(dim=0).numpy()
+
+
+def estimate_correspondence(
+    view1: torch.Tensor,
+    view2: torch.Tensor,
+    *,
+    method: str = "tvl1",
+    threshold: float = 1.0,
+    **flow_kwargs: object,
+) -> Correspondence:
+    """Dense correspondences with scikit-image optical flow and a consistency mask.
+
+    The flow is estimated in both directions (view 1 → 2 and 2 → 1) on the grayscale
+    images; only its horizontal component is kept, as the orthographic rotation about
+    the vertical axis moves points along rows.
+
+    Args:
+        view1: (C, H, W) or (B, C, H, W) image of the first seed view.
+        view2: same shape, the second seed view.
+        method: ``"tvl1"`` (:func:`skimage.registration.optical_flow_tvl1`) or ``"ilk"``
+            (:func:`skimage.registration.optical_flow_ilk`).
+        threshold: forward–backward tolerance in pixels for the validity masks.
+        **flow_kwargs: passed to the scikit-image flow function.
+
+    Returns:
+        A :class:`Correspondence` of shape (B, H, W) on the device and dtype of ``view1``.
+    """
+    v1 = check_float_tensor(view1, "view1")
+    v2 = check_float_tensor(view2, "view2")
+    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
+    if v2.shape != v1.shape:
+        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
+    if method not in _METHODS:
+        raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    check_finite(v1, "view1")
+    check_finite(v2, "view2")
+    if v1.ndim == 3:
+        v1, v2 = v1[None], v2[None]
+    flow = optical_flow_tvl1 if method == "tvl1" else optical_flow_ilk
+    d12, d21, v12, v21 = [], [], [], []
+    for a, b in zip(v1, v2, strict=True):
+        ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
+        # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
+        fwd = flow(ga, gb, **flow_kwargs)
+        d12.append(fwd[1])
+        v12.append(fwd[0])
+        bwd = flow(gb, ga, **flow_kwargs)
+        d21.append(bwd[1])
+        v21.append(bwd[0])
+
+    def tensor(arrays: list[np.ndarray]) -> torch.Tensor:
+        return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)
+
+    corr = correspondence_from_disparity(tensor(d12), tensor(d21), threshold=threshold)
+    return dataclasses.replace(corr, vertical_12=tensor(v12), vertical_21=tensor(v21))

@@ -1,0 +1,60 @@
+"""Input and output: checkpoints, ONNX export and its metadata, image reading.
+
+Names are imported lazily (PEP 562): ``torch_eigview.io.images`` and
+``torch_eigview.io.onnx_metadata`` need no torch, so ``eigview predict`` stays torch-free.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
+    from torch_eigview.io.images import read_image
+    from torch_eigview.io.onnx import (
+        compare_with_eager,
+        export_onnx,
+        export_projection,
+        export_recognizer,
+        read_metadata,
+    )
+    from torch_eigview.io.onnx_metadata import OnnxModelInfo
+
+_SOURCES = {
+    "load_recognizer": "checkpoint",
+    "save_recognizer": "checkpoint",
+    "read_image": "images",
+    "compare_with_eager": "onnx",
+    "export_onnx": "onnx",
+    "export_projection": "onnx",
+    "export_recognizer": "onnx",
+    "read_metadata": "onnx",
+    "OnnxModelInfo": "onnx_metadata",
+}
+
+__all__ = [
+    "OnnxModelInfo",
+    "compare_with_eager",
+    "export_onnx",
+    "export_projection",
+    "export_recognizer",
+    "load_recognizer",
+    "read_image",
+    "read_metadata",
+    "save_recognizer",
+]
+
+
+def __getattr__(name: str) -> Any:
+    """Imports a public name's submodule on first use (PEP 562) and caches the name."""
+    source = _SOURCES.get(name)
+    if source is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

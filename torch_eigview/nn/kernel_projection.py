@@ -1,0 +1,281 @@
+"""The frozen kernel-PCA projection layer and the kernels it evaluates.
+
+``KernelProjection`` holds what ``KernelEigenspace.fit`` learned as buffers: the training
+views (or the Nyström landmark views), the coefficients that map a centred kernel row to
+eigenspace coordinates, and the mean kernel row used to centre it. ``forward`` evaluates
+the kernel against those views and multiplies: the kernel is fixed at construction, so
+the graph has no data-dependent branches and exports to ONNX.
+
+Kernels follow ``sklearn.metrics.pairwise``: ``linear`` x·y, ``poly`` (γ x·y + c0)^d,
+``rbf`` exp(−γ‖x − y‖²) and ``cosine`` x·y / (‖x‖ ‖y‖), with γ = 1/N when not given
+(scikit-learn's ``KernelPCA`` default, 1/n_features).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import nn
+
+from torch_eigview.check import (
+    check_choice,
+    check_finite,
+    check_float_tensor,
+    check_image_shape,
+    check_kernel_params,
+    check_ndim,
+    check_view_input,
+)
+from torch_eigview.nn.functional import unit_rows
+
+__all__ = ["KERNELS", "KernelProjection", "pairwise_kernel"]
+
+KERNELS = ("rbf", "poly", "cosine", "linear")
+
+
+def pairwise_kernel(
+    x: torch.Tensor,
+    y: torch.Tensor,
+    kernel: str,
+    gamma: float,
+    degree: int,
+    coef0: float,
+    y_sqnorm: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """The kernel matrix k(x_i, y_j) of two sets of vectors (trusted inputs).
+
+    Args:
+        x: (P, N) vectors.
+        y: (Q, N) vectors of x's dtype.
+        kernel: one of ``KERNELS``.
+        gamma, degree, coef0: the kernel's parameters (γ for rbf and poly).
+        y_sqnorm: optional (Q,) precomputed ``‖y_j‖²`` (rbf and cosine).
+
+    Returns:
+        (P, Q) kernel values.
+    """
+    if kernel == "linear":
+        return x @ y.T
+    if kernel == "poly":
+        return (gamma * (x @ y.T) + coef0) ** degree
+    if y_sqnorm is None:
+        y_sqnorm = y.square().sum(dim=1)
+    tiny = torch.finfo(x.dtype).tiny
+    if kernel == "cosine":
+        # Zero rows give zero similarity, as sklearn's ``normalize`` leaves them at zero.
+        x_norm = x.norm(dim=1, keepdim=True).clamp_min(tiny)
+        return (x / x_norm) @ (y / y_sqnorm.sqrt().clamp_min(tiny)[:, None]).T
+    # rbf: ‖x − y‖² expanded as ‖x‖² − 2 x·y + ‖y‖² (one matrix product, as sklearn's
+    # ``euclidean_distances``), clamped at 0 against rounding.
+    sq = x.square().sum(dim=1, keepdim=True) - 2 * (x @ y.T) + y_sqnorm
+    return torch.exp(-gamma * sq.clamp_min(0))
+
+
+class KernelProjection(nn.Module):
+    """Projects views onto a frozen kernel eigenspace: ``z = (k(x, V) − k̄) @ A``.
+
+    V are the T stored views (all training views, or the Nyström landmarks), A the (T, k)
+    coefficients and k̄ the (T,) mean kernel row of the training set. For exact kernel PCA
+    A holds scikit-learn's scaled eigenvectors α/√λ of the centred kernel matrix; their
+    columns sum to zero, so the test-side centring term of ``KernelCenterer`` (the row
+    mean of k(x, V) minus the grand mean, times 1ᵀA) is zero and left out of the graph.
+    For Nyström A = W^{-1/2}U maps the landmark features to their principal axes.
+
+    All tensors are persistent buffers; the kernel and its parameters are fixed at
+    construction (saved in ``state_dict`` as extra state) and become constants of an
+    exported graph. Only the named kernels are supported: a callable kernel could neither
+    be exported nor saved in a ``state_dict``, so ``KernelEigenspace.to_module`` refuses it.
+
+    Args:
+        vectors: (T, N) stored views, N = C*H*W.
+        coefficients: (T, k) map from a centred kernel row to coordinates.
+        kernel_mean: (T,) mean over the training views of their kernel rows against V.
+        kernel: one of "rbf", "poly", "cosine", "linear".
+        gamma: γ of rbf and poly, > 0; None means 1/N.
+        degree: degree of poly, int >= 1.
+        coef0: c0 of poly.
+        eigenvalues: optional (k,) eigenvalues of the centred kernel matrix (kept for
+            reference; an empty (0,) buffer when omitted).
+        image_shape: (C, H, W) of a view, or None (saved as extra state).
+        unit_norm: divide each input view by its L2 norm first (the views fitted must
+            then have been unit-norm too), as in ``EigenProjection``.
+
+    Raises:
+        TypeError: a tensor argument is not a floating tensor, dtypes differ, or the
+            kernel is not a str.
+        ValueError: inconsistent shapes, non-finite values, an unknown kernel or bad
+            kernel parameters.
+
+    Example:
+        >>> m = KernelProjection(torch.eye(4), torch.ones(4, 2) / 4, torch.full((4,), 0.25), "linear")
+        >>> m(torch.ones(3, 4)).shape
+        torch.Size([3, 2])
+    """
+
+    vectors: torch.Tensor
+    coefficients: torch.Tensor
+    kernel_mean: torch.Tensor
+    vectors_sqnorm: torch.Tensor
+    eigenvalues: torch.Tensor
+
+    def __init__(
+        self,
+        vectors: torch.Tensor,
+        coefficients: torch.Tensor,
+        kernel_mean: torch.Tensor,
+        kernel: str = "rbf",
+        gamma: float | None = None,
+        degree: int = 3,
+        coef0: float = 1.0,
+        eigenvalues: torch.Tensor | None = None,
+        image_shape: tuple[int, int, int] | None = None,
+        unit_norm: bool = False,
+    ) -> None:
+        super().__init__()
+        if callable(kernel) and not isinstance(kernel, str):
+            raise TypeError(
+                "kernel must be a str, one of ('rbf', 'poly', 'cosine', 'linear'), got a callable: "
+                "a callable kernel cannot be exported to ONNX nor saved in a state_dict"
+            )
+        self.kernel = check_choice(kernel, "kernel", KERNELS)
+        gamma, self.degree, self.coef0 = check_kernel_params(gamma, degree, coef0)
+        if not isinstance(unit_norm, bool):
+            raise TypeError(f"unit_norm must be a bool, got {type(unit_norm).__name__}")
+        self.unit_norm = unit_norm
+        for tensor, name, layout, ndim in (
+            (vectors, "vectors", "(T, N)", 2),
+            (coefficients, "coefficients", "(T, k)", 2),
+            (kernel_mean, "kernel_mean", "(T,)", 1),
+        ):
+            check_float_tensor(tensor, name)
+            check_ndim(tensor, name, (ndim,), layout)
+        n_vectors, n_features = vectors.shape
+        if n_vectors < 1 or n_features < 1 or coefficients.shape[1] < 1:
+            raise ValueError(
+                f"vectors (T, N) and coefficients (T, k) must have T, N, k >= 1, "
+                f"got {tuple(vectors.shape)} and {tuple(coefficients.shape)}"
+            )
+        if coefficients.shape[0] != n_vectors or kernel_mean.shape[0] != n_vectors:
+            raise ValueError(
+                f"coefficients must have shape ({n_vectors}, k) and kernel_mean ({n_vectors},) "
+                f"to match vectors of shape {tuple(vectors.shape)}, got {tuple(coefficients.shape)} "
+                f"and {tuple(kernel_mean.shape)}"
+            )
+        if eigenvalues is None:
+            eigenvalues = vectors.new_empty(0)
+        else:
+            check_float_tensor(eigenvalues, "eigenvalues")
+            if tuple(eigenvalues.shape) != (coefficients.shape[1],):
+                raise ValueError(
+                    f"eigenvalues must have shape ({coefficients.shape[1]},), got {tuple(eigenvalues.shape)}"
+                )
+        for tensor, name in (
+            (coefficients, "coefficients"),
+            (kernel_mean, "kernel_mean"),
+            (eigenvalues, "eigenvalues"),
+        ):
+            if tensor.dtype != vectors.dtype:
+                raise TypeError(f"{name} must have dtype {vectors.dtype} like vectors, got {tensor.dtype}")
+        for tensor, name in (
+            (vectors, "vectors"),
+            (coefficients, "coefficients"),
+            (kernel_mean, "kernel_mean"),
+            (eigenvalues, "eigenvalues"),
+        ):
+            check_finite(tensor, name)
+        self.gamma = 1.0 / n_features if gamma is None else gamma
+        self.image_shape = check_image_shape(image_shape, n_features, "image_shape")
+        vectors = vectors.detach().clone(memory_format=torch.contiguous_format)
+        self.register_buffer("vectors", vectors)
+        self.register_buffer(
+            "coefficients", coefficients.detach().clone(memory_format=torch.contiguous_format)
+        )
+        self.register_buffer("kernel_mean", kernel_mean.detach().clone())
+        # ‖v‖² of the stored views, precomputed for rbf and cosine.
+        self.register_buffer("vectors_sqnorm", vectors.square().sum(dim=1))
+        self.register_buffer("eigenvalues", eigenvalues.detach().clone().to(vectors.device))
+
+    @property
+    def in_features(self) -> int:
+        """N, the number of values in one view."""
+        return self.vectors.shape[1]
+
+    @property
+    def n_components(self) -> int:
+        """k, the dimension of the eigenspace."""
+        return self.coefficients.shape[1]
+
+    @property
+    def n_vectors(self) -> int:
+        """T, the number of stored views (training views or Nyström landmarks)."""
+        return self.vectors.shape[0]
+
+    def _check_views(self, x: torch.Tensor) -> None:
+        check_view_input(x, self.in_features, self.image_shape, self.vectors.dtype)
+
+    def prepare(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, ...) views → (B, N) vectors as the kernel sees them (flattened, unit norm if set)."""
+        return unit_rows(x) if self.unit_norm else x.flatten(1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Projects a batch of views onto the kernel eigenspace.
+
+        Args:
+            x: (B, C, H, W) or (B, N) views, with the buffers' dtype and device.
+
+        Returns:
+            (B, k) coordinates. Differentiable with respect to ``x``.
+
+        Raises:
+            ValueError: ``x`` does not have one of the accepted shapes.
+            TypeError: ``x`` is not a tensor of the buffers' dtype.
+        """
+        self._check_views(x)
+        rows = pairwise_kernel(
+            self.prepare(x),
+            self.vectors,
+            self.kernel,
+            self.gamma,
+            self.degree,
+            self.coef0,
+            self.vectors_sqnorm,
+        )
+        return (rows - self.kernel_mean) @ self.coefficients
+
+    def get_extra_state(self) -> dict[str, Any]:
+        """Saves the kernel, its parameters, ``image_shape`` and ``unit_norm`` (not tensors)."""
+        return {
+            "kernel": self.kernel,
+            "gamma": self.gamma,
+            "degree": self.degree,
+            "coef0": self.coef0,
+            "image_shape": self.image_shape,
+            "unit_norm": self.unit_norm,
+        }
+
+    def set_extra_state(self, state: Any) -> None:
+        """Restores what ``get_extra_state`` saved, validating it."""
+        keys = {"kernel", "gamma", "degree", "coef0", "image_shape", "unit_norm"}
+        if not isinstance(state, dict) or not keys <= set(state):
+            raise ValueError(f"extra state must be a dict with keys {sorted(keys)}, got {state!r}")
+        self.kernel = check_choice(state["kernel"], "kernel", KERNELS)
+        gamma, self.degree, self.coef0 = check_kernel_params(state["gamma"], state["degree"], state["coef0"])
+        self.gamma = 1.0 / self.in_features if gamma is None else gamma
+        self.image_shape = check_image_shape(state["image_shape"], self.in_features, "image_shape")
+        self.unit_norm = bool(state["unit_norm"])
+
+    def extra_repr(self) -> str:
+        text = (
+            f"in_features={self.in_features}, n_components={self.n_components}, "
+            f"n_vectors={self.n_vectors}, kernel={self.kernel!r}"
+        )
+        if self.kernel in ("rbf", "poly"):
+            text += f", gamma={self.gamma:g}"
+        if self.kernel == "poly":
+            text += f", degree={self.degree}, coef0={self.coef0:g}"
+        if self.image_shape is not None:
+            text += f", image_shape={self.image_shape}"
+        if self.unit_norm:
+            text += ", unit_norm=True"
+        return text

@@ -1,0 +1,158 @@
+"""Recognition by nearest neighbour in the eigenspace (Sec. 4.2).
+
+Every gallery view (each object's synthesized views) is projected once; a test image is
+projected and takes the label and pose of the nearest gallery point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from torch_eigview.check import check_finite, check_float_tensor, check_ndim
+from torch_eigview.nn.kernel_projection import KernelProjection
+from torch_eigview.nn.projection import EigenProjection
+
+__all__ = ["NearestNeighborRecognizer", "Recognition"]
+
+
+@dataclass(frozen=True)
+class Recognition:
+    """What the recognizer says about B test images.
+
+    Attributes:
+        labels: (B,) int64 object label of the nearest gallery view.
+        poses: (B,) pose of that view in degrees.
+        distances: (B,) Euclidean distance to it in the eigenspace.
+        indices: (B,) int64 index of that view in the gallery.
+    """
+
+    labels: torch.Tensor
+    poses: torch.Tensor
+    distances: torch.Tensor
+    indices: torch.Tensor
+
+
+class NearestNeighborRecognizer(nn.Module):
+    """A frozen eigenspace projection with a gallery of labelled, posed points.
+
+    ``forward`` returns tensors only (label, pose, distance), so the whole recognizer
+    exports to ONNX as Sub/MatMul for the projection and MatMul/ReduceMin/ArgMin/Gather for
+    the search; squared distances are expanded as ``|z|² - 2 z·g + |g|²``.
+
+    Args:
+        projection: the frozen :class:`EigenProjection` or :class:`KernelProjection`
+            (any ``nn.Module`` with an int ``n_components`` k and tensor buffers).
+        codes: (G, k) gallery points in the eigenspace.
+        labels: (G,) int64 object labels.
+        poses: (G,) poses in degrees.
+        label_names: optional names, one per distinct label value, in sorted label order.
+
+    Example:
+        >>> proj = EigenProjection(torch.zeros(4), torch.eye(4)[:2])
+        >>> rec = NearestNeighborRecognizer.from_views(proj, torch.eye(4)[:2], torch.tensor([3, 7]), torch.tensor([0.0, 5.0]))
+        >>> rec.predict(torch.tensor([[0.0, 0.9, 0.0, 0.0]])).labels
+        tensor([7])
+    """
+
+    codes: torch.Tensor
+    labels: torch.Tensor
+    poses: torch.Tensor
+    codes_sqnorm: torch.Tensor
+
+    def __init__(
+        self,
+        projection: EigenProjection | KernelProjection,
+        codes: torch.Tensor,
+        labels: torch.Tensor,
+        poses: torch.Tensor,
+        label_names: list[str] | None = None,
+    ) -> None:
+        super().__init__()
+        n_components = getattr(projection, "n_components", None)
+        if not isinstance(projection, nn.Module) or not isinstance(n_components, int):
+            raise TypeError(
+                "projection must be an EigenProjection or a KernelProjection (an nn.Module with an int "
+                f"n_components), got {type(projection).__name__}"
+            )
+        reference = next(projection.buffers(), codes)  # the projection's dtype and device
+        check_float_tensor(codes, "codes")
+        check_ndim(codes, "codes", (2,), "(G, k)")
+        check_finite(codes, "codes")
+        g, k = codes.shape
+        if g == 0:
+            raise ValueError("codes must hold at least one gallery view, got G=0")
+        if k != projection.n_components:
+            raise ValueError(
+                f"codes must have shape (G, {projection.n_components}), got {tuple(codes.shape)}"
+            )
+        for tensor, name in ((labels, "labels"), (poses, "poses")):
+            if not isinstance(tensor, torch.Tensor):
+                raise TypeError(f"{name} must be a torch.Tensor, got {type(tensor).__name__}")
+        if tuple(labels.shape) != (g,) or labels.is_floating_point():
+            raise ValueError(
+                f"labels must be an integer tensor of shape ({g},), got {labels.dtype} {tuple(labels.shape)}"
+            )
+        if tuple(poses.shape) != (g,):
+            raise ValueError(f"poses must have shape ({g},), got {tuple(poses.shape)}")
+        check_finite(poses.to(torch.float64), "poses")
+        n_distinct = int(labels.unique().numel())
+        if label_names is not None and len(label_names) != n_distinct:
+            raise ValueError(
+                f"label_names must name the {n_distinct} distinct labels, got {len(label_names)} names"
+            )
+        self.projection = projection
+        self.label_names = None if label_names is None else [str(n) for n in label_names]
+        codes = codes.detach().to(reference)
+        self.register_buffer("codes", codes.clone())
+        self.register_buffer("codes_sqnorm", codes.square().sum(dim=1))
+        self.register_buffer("labels", labels.detach().to(torch.int64).clone())
+        self.register_buffer("poses", poses.detach().to(reference).clone())
+
+    @classmethod
+    def from_views(
+        cls,
+        projection: EigenProjection | KernelProjection,
+        views: torch.Tensor,
+        labels: torch.Tensor,
+        poses: torch.Tensor,
+        label_names: list[str] | None = None,
+    ) -> NearestNeighborRecognizer:
+        """Projects the gallery ``views`` (G, C, H, W) or (G, N) and builds the recognizer."""
+        with torch.no_grad():
+            codes = projection(views)
+        return cls(projection, codes, labels, poses, label_names)
+
+    @property
+    def n_gallery(self) -> int:
+        return self.codes.shape[0]
+
+    def extra_repr(self) -> str:
+        n_labels = int(self.labels.unique().numel())
+        return f"gallery={self.n_gallery}, labels={n_labels}"
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Recognizes a batch of views.
+
+        Args:
+            x: (B, C, H, W) or (B, N) views (the projection's dtype and size).
+
+        Returns:
+            ``(labels, poses, distances)``, each (B,).
+        """
+        labels, poses, distances, _ = self._search(x)
+        return labels, poses, distances
+
+    def _search(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        z = self.projection(x)
+        sq = z.square().sum(dim=1, keepdim=True) - 2 * z @ self.codes.T + self.codes_sqnorm
+        best, index = sq.min(dim=1)
+        return self.labels[index], self.poses[index], best.clamp_min(0).sqrt(), index
+
+    def predict(self, x: torch.Tensor) -> Recognition:
+        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices."""
+        with torch.no_grad():
+            labels, poses, distances, index = self._search(x)
+        return Recognition(labels, poses, distances, index)

@@ -1,0 +1,23 @@
+"""Warping: target→source maps, the view-warp modules (orthographic/affine and
+perspective), size normalization and the sparse G·C operator (Eqs. 3–6).
+"""
+
+from __future__ import annotations
+
+from torch_eigview.warp.normalize import foreground_mask, normalize_extent
+from torch_eigview.warp.novel_view import BLENDS, NovelViewWarp, WarpMaps
+from torch_eigview.warp.operator import SparseViewOperator
+from torch_eigview.warp.perspective import PerspectiveWarp, turntable_pose
+from torch_eigview.warp.raster import invert_map_2d
+
+__all__ = [
+    "BLENDS",
+    "NovelViewWarp",
+    "PerspectiveWarp",
+    "SparseViewOperator",
+    "WarpMaps",
+    "foreground_mask",
+    "invert_map_2d",
+    "normalize_extent",
+    "turntable_pose",
+]
