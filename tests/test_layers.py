@@ -101,7 +101,8 @@ def test_no_private_name_crosses_a_subpackage(path: Path) -> None:
         f"line {line}: {module}.{name}"
         for line, module, names in _imports(path)
         for name in names
-        if _unit(module) != unit and (name.startswith("_") or any(p.startswith("_") for p in module.split(".")))
+        if _unit(module) != unit
+        and (name.startswith("_") or any(p.startswith("_") for p in module.split(".")))
     ]
     assert not wrong, f"{here} imports private names of another subpackage: {wrong}"
 

@@ -7,7 +7,6 @@ import time
 
 import pytest
 import torch
-from tests.helpers import warp_errors
 
 from torch_eigview import NovelViewWarp, estimate_correspondence
 from torch_eigview.datasets.renderer import (
@@ -21,6 +20,8 @@ from torch_eigview.datasets.renderer import (
     render,
     view_correspondence,
 )
+
+from tests.helpers import warp_errors
 
 SIZE = 64
 ALPHA = 10.0

@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from tests.helpers import check_module, rand
 
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
@@ -21,6 +20,8 @@ from torch_eigview.errors import NotFittedError
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions
+
+from tests.helpers import check_module, rand
 
 IMAGE_SHAPE = (1, 3, 4)
 N_FEATURES = 12

@@ -7,12 +7,13 @@ import math
 
 import pytest
 import torch
-from tests.helpers import check_module, rand
 
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.pose import estimate_elevation, orthographic_coefficients
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
 from torch_eigview.warp.novel_view import NovelViewWarp, WarpMaps, _sampler
+
+from tests.helpers import check_module, rand
 
 # --- an analytic scene: a textured vertical cylinder on the rotation axis --------------
 #

@@ -7,10 +7,11 @@ import math
 
 import pytest
 import torch
-from tests.helpers import rand
 
 from torch_eigview.geometry.row_maps import invert_row_map
 from torch_eigview.warp.raster import invert_map_2d
+
+from tests.helpers import rand
 
 
 def _grid(h: int, w: int, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
