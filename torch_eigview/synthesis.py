@@ -204,7 +204,7 @@ def _steps(alpha: object, n_seeds: int) -> list[float]:
     return steps
 
 
-def _check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
+def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
     seeds = check_float_tensor(seeds, "seeds")
     check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
     if seeds.shape[0] < 2:
@@ -230,7 +230,7 @@ def pair_geometry(
         V − 1 :class:`PairGeometry` records.
     """
     opts = options or SynthesisOptions()
-    seeds, steps = _check_seeds(seeds, alpha)
+    seeds, steps = check_seeds(seeds, alpha)
     out = []
     for n in range(seeds.shape[0] - 1):
         t0 = time.perf_counter()
@@ -278,7 +278,7 @@ def synthesize_views(
             of 180 degrees or more.
     """
     opts = options or SynthesisOptions()
-    seeds, steps = _check_seeds(seeds, alpha)
+    seeds, steps = check_seeds(seeds, alpha)
     starts = _seed_angles(steps)
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1

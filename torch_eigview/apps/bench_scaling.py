@@ -19,7 +19,7 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.decomposition.streaming import _CHUNK
+from torch_eigview.decomposition.streaming import CHUNK_VIEWS
 
 __all__ = ["bench_coil100", "bench_scaling", "smooth_views"]
 
@@ -197,7 +197,7 @@ def _measure(spec: dict[str, Any]) -> dict[str, Any]:
     # views, the scatter path a chunk of N/2 views, the randomized one a block.
     max_views = result["max_views"]
     if result["kind"] in ("exact", "pipeline"):
-        held = min(max_views, n) + min(_CHUNK, max_views, n) if n < features else features // 2
+        held = min(max_views, n) + min(CHUNK_VIEWS, max_views, n) if n < features else features // 2
     else:
         held = 41 if result["kind"] == "randomized" else 0
     result["panel_mib"] = held * features * 4 / 2**20

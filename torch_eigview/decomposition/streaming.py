@@ -48,7 +48,7 @@ BlockSource = Callable[[], Iterable[torch.Tensor]]
 """A callable returning a fresh iterable of (P_b, N) or (P_b, C, H, W) view blocks."""
 
 _METHODS = ("exact", "randomized")
-_CHUNK = 256  # views per cross-product GEMM of the exact Gram path
+CHUNK_VIEWS = 256  # views per cross-product GEMM of the exact Gram path
 
 
 def blocks_of(x: torch.Tensor, block_size: int) -> BlockSource:
@@ -310,10 +310,12 @@ class StreamingEigenspace(Eigenspace):
         for lo, hi in panels:
             # The panel's blocks are centred straight into one buffer (no list + cat, which
             # held the panel twice at its peak); the later blocks are centred into a chunk
-            # of up to _CHUNK views (and max_views), multiplied against the panel when full (a
+            # of up to CHUNK_VIEWS views (and max_views), multiplied against the panel when full (a
             # GEMM with the 41 rows of one object runs at 2/3 of the speed of one with 256).
             panel = torch.empty(hi - lo, mean.numel(), dtype=mean.dtype, device=mean.device)
-            chunks = _Chunks(mean, min(_CHUNK, self.max_views), functools.partial(_cross, gram, panel, lo))
+            chunks = _Chunks(
+                mean, min(CHUNK_VIEWS, self.max_views), functools.partial(_cross, gram, panel, lo)
+            )
             start = 0
             for b in stream:
                 stop = start + b.shape[0]

@@ -27,7 +27,7 @@ import torch
 import torch.multiprocessing as mp
 
 from torch_eigview.check import as_angle_tensor
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, _check_seeds, synthesize_views
+from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_seeds, synthesize_views
 
 __all__ = ["available_cpus", "synthesize_objects"]
 
@@ -104,7 +104,7 @@ def synthesize_objects(
     if first is None:
         return
     # The first object is checked here, before any process starts (its alpha too).
-    _check_seeds(_as_seeds(first), alpha)
+    check_seeds(_as_seeds(first), alpha)
     context = mp.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker)
     pending: deque[Future[SynthesizedViews]] = deque()
