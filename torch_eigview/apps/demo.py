@@ -5,8 +5,8 @@ orthographic camera. Per object, two seed views (0° and α; three views at −�
 the views synthesized every 1° (Eq. 2, 7; :func:`~torch_eigview.synthesis.synthesize_views`
 with flow-estimated or exact correspondences); one eigenspace of 15 components spans all
 objects' synthesized views, and the 90 rendered test views per object (−45°..44°, 1°) are
-recognized by their nearest neighbour, as in the COIL experiment
-(:mod:`torch_eigview.apps.experiment`). :func:`run_demo` prints Fig. 2(ii)'s per-object table
+recognized by their nearest neighbour: the protocol of the COIL experiment
+(:mod:`torch_eigview.apps.protocol`). :func:`run_demo` prints Fig. 2(ii)'s per-object table
 and draws the eigenimages and, for one object, synthesized views beside rendered ones
 (Fig. 2(f–o)).
 """
@@ -14,11 +14,11 @@ and draws the eigenimages and, for one object, synthesized views beside rendered
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import torch
 
-from torch_eigview.apps.experiment import angle_range
+from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery
 from torch_eigview.apps.synthetic_scene import (
     SyntheticScene,
     _gallery_angles,
@@ -27,7 +27,6 @@ from torch_eigview.apps.synthetic_scene import (
     synthetic_gallery,
 )
 from torch_eigview.datasets.renderer import SHAPES, OrthographicCamera
-from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -70,44 +69,23 @@ def recognition_experiment(
     """
     scene = scene or SyntheticScene()
     t_start = time.perf_counter()
-    gallery, labels, poses = [], [], []
-    for i, name in enumerate(scene.shapes):
-        views, thetas = synthetic_gallery(scene, name, alpha, n_views, synth, correspondences)
-        gallery.append(views)
-        labels += [i] * len(thetas)
-        poses += thetas
-    x = torch.cat(gallery)
+    x, labels, poses = stack_gallery(_gallery_blocks(scene, alpha, n_views, synth, correspondences))
     t_gallery = time.perf_counter()
-    v = x.flatten(1)
-    # Unit-norm views, as in the COIL experiment (Murase and Nayar's brightness normalization).
-    space = Eigenspace(components).fit(v / v.norm(dim=1, keepdim=True).clamp_min(1e-12))
-    c, h, w = x.shape[1:]
-    projection = EigenProjection(
-        space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=True
-    )
-    recognizer = NearestNeighborRecognizer.from_views(
-        projection, x, torch.tensor(labels), torch.tensor(poses, dtype=x.dtype), list(scene.shapes)
-    )
+    recognizer = build_recognizer(x, labels, poses, components, label_names=list(scene.shapes))
     test_angles = angle_range(test[0], test[1], 1.0, name="test")
-    per_object: dict[str, float] = {}
-    n_ok, pose_err = 0, []
-    for i, name in enumerate(scene.shapes):
-        result = recognizer.predict(scene.views(name, test_angles))
-        ok = result.labels == i
-        per_object[name] = 100.0 * float(ok.double().mean())
-        n_ok += int(ok.sum())
-        pose_err.append((result.poses - torch.tensor(test_angles, dtype=x.dtype)).abs()[ok])
-    n_test = len(scene.shapes) * len(test_angles)
-    errors = torch.cat(pose_err)
+    truth = torch.tensor(test_angles, dtype=x.dtype)
+    result = score(
+        recognizer, ((name, i, scene.views(name, test_angles), truth) for i, name in enumerate(scene.shapes))
+    )
     t_end = time.perf_counter()
     return {
         "alpha": alpha,
         "n_views": n_views,
         "correspondences": correspondences,
-        "accuracy": 100.0 * n_ok / n_test,
-        "per_object": per_object,
-        "pose_mae_deg": float(errors.mean()) if errors.numel() else float("nan"),
-        "n_test": n_test,
+        "accuracy": result.accuracy,
+        "per_object": result.per_object,
+        "pose_mae_deg": result.pose_mae_deg,
+        "n_test": result.n_test,
         "n_gallery": x.shape[0],
         "seconds": {
             "gallery": t_gallery - t_start,
@@ -116,6 +94,19 @@ def recognition_experiment(
         },
         "recognizer": recognizer,
     }
+
+
+def _gallery_blocks(
+    scene: SyntheticScene,
+    alpha: float,
+    n_views: int,
+    synth: tuple[float, float, float] | None,
+    correspondences: str,
+) -> Iterator[tuple[torch.Tensor, int, list[float]]]:
+    """Per object, in the scene's order, its synthesized views, its index and their angles."""
+    for i, name in enumerate(scene.shapes):
+        views, thetas = synthetic_gallery(scene, name, alpha, n_views, synth, correspondences)
+        yield views, i, thetas
 
 
 def format_table(

@@ -22,39 +22,21 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import torch
 
+from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
 from torch_eigview.check import check_alpha, check_n_components
 from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
-from torch_eigview.nn.functional import unit_rows
-from torch_eigview.nn.kernel_projection import KernelProjection
-from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
 METHODS = ("nvs", "sparse", "dense")
-
-
-def wrap_degrees(angles: torch.Tensor) -> torch.Tensor:
-    """Wraps angles to (-180, 180]."""
-    return 180 - torch.remainder(180 - angles, 360)
-
-
-def angle_range(start: float, stop: float, step: float, name: str) -> list[float]:
-    """``start, start + step, …, stop`` (inclusive), validated."""
-    if not step > 0:
-        raise ValueError(f"{name} step must be positive, got {step}")
-    if stop < start:
-        raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
-    n = int((stop - start) / step + 1e-9) + 1
-    return [start + i * step for i in range(n)]
 
 
 @dataclass
@@ -169,21 +151,24 @@ class CoilExperiment:
         folder: CoilFolder,
         obj: int,
         seconds: dict[str, float],
-    ) -> tuple[torch.Tensor, list[float]]:
+        elevations: dict[int, list[float]],
+    ) -> tuple[torch.Tensor, int, list[float]]:
+        """``(views, obj, poses)`` of one object's gallery; adds the synthesis's times to
+        ``seconds`` and its elevations to ``elevations``."""
         c = self.center
         if self.method == "sparse":
             angles = [c + n * self.alpha for n in range(self.views)]
-            return folder.images(obj, angles), angles
+            return folder.images(obj, angles), obj, angles
         if self.method == "dense":
             angles = [c + a for a in self.synth_angles(5.0)]
-            return folder.images(obj, angles), angles
+            return folder.images(obj, angles), obj, angles
         seeds = self._seeds(folder, obj)
         thetas = self.synth_angles()
         out = synthesize_views(seeds, self.alpha, thetas, self.synthesis)
         for key, value in out.seconds.items():
             seconds[key] += value
-        self._elevations[obj] = out.elevations
-        return out.views, [c + t for t in thetas]
+        elevations[obj] = out.elevations
+        return out.views, obj, [c + t for t in thetas]
 
     def run(
         self,
@@ -204,54 +189,44 @@ class CoilExperiment:
             raise ValueError("objects must name at least one object")
         t_start = time.perf_counter()
         seconds = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0, "recognition": 0.0}
-        self._elevations: dict[int, list[float]] = {}
-        gallery, labels, poses = [], [], []
-        for obj in progress(objects) if progress else objects:
-            views, angles = self._gallery_of(folder, obj, seconds)
-            gallery.append(views)
-            labels += [obj] * len(angles)
-            poses += angles
-        x = torch.cat(gallery)
+        elevations: dict[int, list[float]] = {}
+        x, labels, poses = stack_gallery(
+            self._gallery_of(folder, obj, seconds, elevations)
+            for obj in (progress(objects) if progress else objects)
+        )
         t0 = time.perf_counter()
-        x_fit = unit_rows(x) if self.unit_norm else x.flatten(1)
-        c, h, w = x.shape[1:]
-        projection: EigenProjection | KernelProjection
-        if self.kernel is None:
-            space = Eigenspace(self.components).fit(x_fit)
-            projection = EigenProjection(
-                space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=self.unit_norm
-            )
-        else:
-            kspace = KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)
-            projection = kspace.fit(x_fit.reshape(-1, c, h, w)).to_module(unit_norm=self.unit_norm)
-        recognizer = NearestNeighborRecognizer.from_views(
-            projection, x, torch.tensor(labels), wrap_degrees(torch.tensor(poses, dtype=x.dtype))
+        recognizer = build_recognizer(
+            x,
+            labels,
+            wrap_degrees(poses),
+            self.components,
+            unit_norm=self.unit_norm,
+            kernel=self.kernel,
+            gamma=self.gamma,
         )
         seconds["eigen"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
         test_angles = angle_range(self.test[0], self.test[1], 5.0, "test")
-        per_object: dict[int, float] = {}
-        n_ok, pose_err = 0, []
-        for obj in objects:
-            truth = wrap_degrees(torch.tensor([self.center + a for a in test_angles], dtype=x.dtype))
-            result = recognizer.predict(folder.images(obj, truth.tolist()))
-            ok = result.labels == obj
-            per_object[obj] = 100.0 * float(ok.double().mean())
-            n_ok += int(ok.sum())
-            pose_err.append(wrap_degrees(result.poses - truth).abs()[ok])
+        result = score(recognizer, self._tests(folder, objects, test_angles, x.dtype), wrap=True)
         seconds["recognition"] = time.perf_counter() - t0
         # Wall time of the whole run, reading the images included.
         seconds["total"] = time.perf_counter() - t_start
-        n_test = len(objects) * len(test_angles)
-        errors = torch.cat(pose_err)
         return CoilResult(
-            accuracy=100.0 * n_ok / n_test,
-            per_object=per_object,
-            pose_mae_deg=float(errors.mean()) if errors.numel() else float("nan"),
-            n_test=n_test,
+            accuracy=result.accuracy,
+            per_object=result.per_object,
+            pose_mae_deg=result.pose_mae_deg,
+            n_test=result.n_test,
             n_train_views=x.shape[0],
             seconds=seconds,
             recognizer=recognizer,
-            elevations=dict(self._elevations),
+            elevations=elevations,
         )
+
+    def _tests(
+        self, folder: CoilFolder, objects: list[int], test_angles: list[float], dtype: torch.dtype
+    ) -> Iterator[tuple[int, int, torch.Tensor, torch.Tensor]]:
+        """Per object its real views over the test range and their poses (wrapped), read lazily."""
+        for obj in objects:
+            truth = wrap_degrees(torch.tensor([self.center + a for a in test_angles], dtype=dtype))
+            yield obj, obj, folder.images(obj, truth.tolist()), truth

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.apps.experiment import angle_range
+from torch_eigview.apps.protocol import angle_range
 from torch_eigview.datasets.renderer import (
     CAMERAS,
     SHAPES,

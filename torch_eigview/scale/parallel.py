@@ -26,7 +26,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 import torch
 import torch.multiprocessing as mp
 
-from torch_eigview.check import as_angle_tensor
+from torch_eigview.check import as_angle_tensor, check_int
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_seeds, synthesize_views
 
 __all__ = ["available_cpus", "synthesize_objects"]
@@ -43,14 +43,6 @@ def _init_worker() -> None:
     # One thread per process: the parallelism is over objects, and torch's OpenMP pool
     # in every worker would oversubscribe the cores.
     torch.set_num_threads(1)
-
-
-def _check_workers(workers: int) -> int:
-    if isinstance(workers, bool) or not isinstance(workers, int):
-        raise TypeError(f"workers must be an int, got {type(workers).__name__} {workers!r}")
-    if workers < 0:
-        raise ValueError(f"workers={workers} must be >= 0 (0: synthesize in this process)")
-    return workers
 
 
 def synthesize_objects(
@@ -91,7 +83,7 @@ def synthesize_objects(
         >>> [s.views.shape[0] for s in synthesize_objects(seeds, 5.0, [0.0, 2.5, 5.0])]
         [3, 3, 3]
     """
-    workers = _check_workers(workers)
+    workers = check_int(workers, "workers", minimum=0)  # 0: synthesize in this process
     if options is not None and not isinstance(options, SynthesisOptions):
         raise TypeError(f"options must be a SynthesisOptions or None, got {type(options).__name__}")
     angles = as_angle_tensor(thetas, "thetas").tolist()  # checked here, not in a worker
