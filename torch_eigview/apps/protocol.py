@@ -84,7 +84,9 @@ def stack_gallery(
         ``(views, labels, poses)``: (P, C, H, W) views, (P,) int64 labels and (P,) poses
         of the views' dtype, P = Σ T_i, in the order of ``blocks``.
     """
-    views, labels, poses = [], [], []
+    views: list[torch.Tensor] = []
+    labels: list[int] = []
+    poses: list[float] = []
     for block, label, angles in blocks:
         views.append(block)
         labels += [label] * len(angles)
