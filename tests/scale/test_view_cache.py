@@ -76,9 +76,9 @@ def test_bad_input() -> None:
 
 def test_bench_pipeline_case_runs() -> None:
     """The benchmark's whole-build case (flow + synthesis into the cache, exact Gram from it)."""
-    from torch_eigview.apps.bench_scaling import _worker
+    from torch_eigview.apps.bench_scaling import run_case
 
-    row = _worker({"kind": "pipeline", "objects": 3, "size": 32, "channels": 3, "k": 3, "max_views": 41})
+    row = run_case({"kind": "pipeline", "objects": 3, "size": 32, "channels": 3, "k": 3, "max_views": 41})
     assert row["passes"] > 1 and 0 < row["synthesis_s"] <= row["seconds"]
 
 

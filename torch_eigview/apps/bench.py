@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from torch_eigview.apps.bench_scaling import _worker, bench_coil100, bench_scaling, smooth_views
+from torch_eigview.apps.bench_plot import plot_results
+from torch_eigview.apps.bench_scaling import bench_coil100, bench_scaling, run_case, smooth_views
 
 __all__ = ["main", "smooth_views"]
 
@@ -174,53 +175,6 @@ def _table(rows: list[dict[str, Any]], cols: Sequence[tuple[str, str, str]]) -> 
     return "\n".join(lines)
 
 
-def _plot(results: dict[str, Any], path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    panels = (["warp"] if "warp" in results else []) + (
-        ["by_size", "by_objects"] if "scaling" in results else []
-    )
-    if not panels:
-        return
-    fig, axs = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.2), squeeze=False)
-    axes = dict(zip(panels, axs[0], strict=True))
-    if "warp" in results:
-        w = results["warp"]
-        ax = axes["warp"]
-        for key, label in (
-            ("kornia_s", "kornia remap"),
-            ("sparse_views_s", "sparse G·C"),
-            ("skimage_loop_s", "skimage loop"),
-        ):
-            rows = [r for r in w if key in r]
-            ax.loglog([r["size"] ** 2 for r in rows], [r[key] for r in rows], "o-", label=label)
-        ax.set(xlabel="pixels per view", ylabel="seconds", title=f"warp {w[0]['views']} views")
-        ax.legend()
-    if "scaling" in results:
-        for ax, part, xkey, xlabel in (
-            (axes["by_size"], "by_size", "size", "image side (pixels)"),
-            (axes["by_objects"], "by_objects", "objects", "objects (41 views each)"),
-        ):
-            rows = results["scaling"][part]
-            for kind in ("explicit", "exact", "randomized"):
-                sel = [r for r in rows if r["kind"] == kind]
-                ax.loglog(
-                    [r[xkey] for r in sel],
-                    [max(r["peak_mib"], 0.1) for r in sel],
-                    "o-",
-                    label=f"{kind} peak MiB",
-                )
-                ax.loglog([r[xkey] for r in sel], [r["seconds"] for r in sel], "s--", label=f"{kind} s")
-            ax.set(xlabel=xlabel, title=f"eigenspace scaling ({part.replace('_', ' ')})")
-            ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m torch_eigview.apps.bench", description=__doc__.splitlines()[0]
@@ -236,11 +190,142 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+_WARP_COLS = [
+    ("size", "size", "d"),
+    ("kornia s", "kornia_s", ".4f"),
+    ("sparse G·C s", "sparse_views_s", ".4f"),
+    ("(build G,C s)", "sparse_build_s", ".4f"),
+    ("skimage s", "skimage_loop_s", ".4f"),
+    ("sparse/kornia", "sparse_x", ".2f"),
+    ("skimage/kornia", "skimage_x", ".1f"),
+    ("max|sparse-k|", "max_diff_sparse", ".1e"),
+    ("max|skimage-k|", "max_diff_skimage", ".1e"),
+]
+_SCALING_COLS = [
+    ("kind", "kind", "s"),
+    ("objects", "objects", "d"),
+    ("size", "size", "d"),
+    ("seconds", "seconds", ".3f"),
+    ("peak MiB", "peak_mib", ".1f"),
+    ("passes", "passes", "d"),
+    ("P·N·4 MiB", "data_matrix_mib", ".1f"),
+    ("min(P,N)²·8 MiB", "gram_mib", ".1f"),
+    ("held views MiB", "panel_mib", ".1f"),
+]
+_PANEL = 205  # views per panel of the exact Gram path (5 objects): memory is a panel plus P²
+
+
+def _met(ok: bool) -> str:
+    return "met" if ok else "NOT met"
+
+
+def _section_gemm(results: dict[str, Any], quick: bool, reps: int) -> None:
+    g = results["gemm"] = bench_gemm(1024 if quick else 2048, reps)
+    print(f"\n== GEMM: torch.mm {g['n']}x{g['n']} float32: {g['seconds']:.4f} s, {g['gflops']:.1f} GFLOP/s")
+
+
+def _section_warp(results: dict[str, Any], quick: bool, reps: int) -> None:
+    w = results["warp"] = bench_warp([32, 64] if quick else [32, 64, 128, 256], 41, reps)
+    for r in w:
+        if not r.get("skipped"):
+            r["sparse_x"] = r["sparse_views_s"] / r["kornia_s"]
+            r["skimage_x"] = r["skimage_loop_s"] / r["kornia_s"]
+    print("\n== warp 41 views (2 seed views blended): seconds, and ratio to kornia")
+    print(_table(w, _WARP_COLS))
+    for r in w:
+        if r.get("skipped"):
+            print(
+                f"  {r['size']}x{r['size']}: sparse G·C and skimage loop skipped (too slow: minutes "
+                f"beyond {_WARP_SLOW_MAX}x{_WARP_SLOW_MAX}); kornia only"
+            )
+
+
+def _section_eigen(results: dict[str, Any], root: str | None, quick: bool, reps: int) -> None:
+    x, what = coil20_matrix(root, quick)
+    e = results["eigen"] = bench_eigen(x, 15, reps)
+    e["data"] = what
+    gemm = results["gemm"]["gflops"]
+    flops = 2.0 * e["N"] * e["P"] ** 2  # the Gram matrix as a GEMM counts it
+    e["achieved_gflops"] = flops / e["ours_s"] / 1e9
+    e["gemm_fraction"] = e["achieved_gflops"] / gemm
+    print(f"\n== eigen step on the {e['P']} x {e['N']} data matrix, k = 15 ({what})")
+    for key, label, angle in (
+        ("ours_s", "ours (Eigenspace, gram)", None),
+        ("sklearn_full_s", 'sklearn PCA svd_solver="full"', "angle_sklearn_full"),
+        ("sklearn_randomized_s", 'sklearn PCA svd_solver="randomized"', "angle_sklearn_randomized"),
+        ("pca_lowrank_s", "torch.pca_lowrank(q=k+10, niter=2)", "angle_pca_lowrank"),
+    ):
+        extra = f"   max principal angle to ours {e[angle]:.1e} rad" if angle else ""
+        print(f"  {label:<40} {e[key]:8.4f} s  {e[key] / e['ours_s']:6.2f}x ours{extra}")
+    print(f"  (Gram product alone {e['ours_gram_only_s']:.4f} s)")
+    print(
+        f"  ours vs sklearn full: {e['speedup_vs_sklearn_full']:.1f}x faster (target >= 10x: "
+        f"{_met(e['speedup_vs_sklearn_full'] >= 10)})"
+    )
+    print(
+        f"  ours / pca_lowrank: {e['ratio_to_pca_lowrank']:.2f} (target <= 1.5: "
+        f"{_met(e['ratio_to_pca_lowrank'] <= 1.5)})"
+    )
+    print(
+        f"  roofline: 2·N·P² = {flops / 1e9:.1f} GFLOP in {e['ours_s']:.3f} s = {e['achieved_gflops']:.1f} GFLOP/s, "
+        f"{100 * e['gemm_fraction']:.0f}% of GEMM"
+    )
+
+
+def _section_scaling(results: dict[str, Any], quick: bool) -> None:
+    # Objects at 64x64 (N = 4096): 1,000 objects are P = 41,000 views, past N, where the
+    # exact fit folds the N×N scatter (at 128x128 that is 22 TFLOP, minutes, for any method).
+    objects_size = 64
+    s = results["scaling"] = bench_scaling(
+        [32, 64] if quick else [32, 64, 128, 256],
+        [5, 10, 20] if quick else [10, 30, 100, 300, 1000],
+        5 if quick else 20,
+        objects_size,
+        _PANEL,
+    )
+    print(
+        "\n== scaling: seconds and extra peak resident memory of one fit, each in a fresh subprocess "
+        "(peak RSS sampled every ms, minus the RSS just before the fit; views generated on the fly "
+        f"count). explicit = Eigenspace on the stacked views; exact = StreamingEigenspace (Gram by "
+        f"panels of {_PANEL} views when N > P, else the N×N scatter); randomized = range finder"
+    )
+    print("-- image size (objects fixed, 41 views each)")
+    print(_table(s["by_size"], _SCALING_COLS))
+    print(f"-- number of objects ({objects_size}x{objects_size} views, 41 per object): P = 41 x objects")
+    print(_table(s["by_objects"], _SCALING_COLS))
+
+
+def _section_coil100(results: dict[str, Any], quick: bool) -> None:
+    n = 10 if quick else 100
+    c = results["coil100"] = bench_coil100(n, 1025, explicit=not quick)
+    print(
+        f"\n== COIL-100 sized build: {n} objects x 41 views x 3x128x128 synthetic (exact: panels of 1025 views;"
+        " pipeline: flow + synthesis of every object into a disk cache, then the exact Gram from it)"
+    )
+    print(
+        _table(c, [*_SCALING_COLS, ("workers", "workers", "d"), ("workers MiB", "workers_peak_mib", ".0f")])
+    )
+    for row in c:
+        if row["kind"] != "pipeline":
+            continue
+        where = f"{row['workers']} worker processes" if row["workers"] else "in one process, torch's threads"
+        target = (
+            f"target for 100 objects: 60 s, {_met(row['seconds'] <= 60)}"
+            if n == 100
+            else "the 60 s target is for 100 objects"
+        )
+        print(
+            f"  pipeline, {where}: {row['seconds']:.1f} s in all ({row['synthesis_s']:.1f} s flow + "
+            f"synthesis), peak {row['peak_mib']:.0f} MiB here + {row['workers_peak_mib']:.0f} MiB in "
+            f"workers ({target})"
+        )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Runs the benchmarks, prints them, optionally writes JSON and a PNG; returns 0."""
     args = _parser().parse_args(argv)
     if args.worker is not None:
-        print(json.dumps(_worker(json.loads(args.worker))))
+        print(json.dumps(run_case(json.loads(args.worker))))
         return 0
     quick = args.quick
     reps = 2 if quick else 5
@@ -248,145 +333,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"torch_eigview benchmarks (torch {torch.__version__}, {torch.get_num_threads()} threads, quick={quick})"
     )
-
     if "gemm" in args.sections or "eigen" in args.sections:
-        g = results["gemm"] = bench_gemm(1024 if quick else 2048, reps)
-        print(
-            f"\n== GEMM: torch.mm {g['n']}x{g['n']} float32: {g['seconds']:.4f} s, {g['gflops']:.1f} GFLOP/s"
-        )
-
+        _section_gemm(results, quick, reps)
     if "warp" in args.sections:
-        w = results["warp"] = bench_warp([32, 64] if quick else [32, 64, 128, 256], 41, reps)
-        for r in w:
-            if not r.get("skipped"):
-                r["sparse_x"] = r["sparse_views_s"] / r["kornia_s"]
-                r["skimage_x"] = r["skimage_loop_s"] / r["kornia_s"]
-        print("\n== warp 41 views (2 seed views blended): seconds, and ratio to kornia")
-        print(
-            _table(
-                w,
-                [
-                    ("size", "size", "d"),
-                    ("kornia s", "kornia_s", ".4f"),
-                    ("sparse G·C s", "sparse_views_s", ".4f"),
-                    ("(build G,C s)", "sparse_build_s", ".4f"),
-                    ("skimage s", "skimage_loop_s", ".4f"),
-                    ("sparse/kornia", "sparse_x", ".2f"),
-                    ("skimage/kornia", "skimage_x", ".1f"),
-                    ("max|sparse-k|", "max_diff_sparse", ".1e"),
-                    ("max|skimage-k|", "max_diff_skimage", ".1e"),
-                ],
-            )
-        )
-        for r in w:
-            if r.get("skipped"):
-                print(
-                    f"  {r['size']}x{r['size']}: sparse G·C and skimage loop skipped (too slow: minutes "
-                    f"beyond {_WARP_SLOW_MAX}x{_WARP_SLOW_MAX}); kornia only"
-                )
-
+        _section_warp(results, quick, reps)
     if "eigen" in args.sections:
-        x, what = coil20_matrix(args.root, quick)
-        e = results["eigen"] = bench_eigen(x, 15, reps)
-        e["data"] = what
-        gemm = results["gemm"]["gflops"]
-        flops = 2.0 * e["N"] * e["P"] ** 2  # the Gram matrix as a GEMM counts it
-        e["achieved_gflops"] = flops / e["ours_s"] / 1e9
-        e["gemm_fraction"] = e["achieved_gflops"] / gemm
-        print(f"\n== eigen step on the {e['P']} x {e['N']} data matrix, k = 15 ({what})")
-        for key, label in (
-            ("ours_s", "ours (Eigenspace, gram)"),
-            ("sklearn_full_s", 'sklearn PCA svd_solver="full"'),
-            ("sklearn_randomized_s", 'sklearn PCA svd_solver="randomized"'),
-            ("pca_lowrank_s", "torch.pca_lowrank(q=k+10, niter=2)"),
-        ):
-            angle = {
-                "sklearn_full_s": "angle_sklearn_full",
-                "sklearn_randomized_s": "angle_sklearn_randomized",
-                "pca_lowrank_s": "angle_pca_lowrank",
-            }.get(key)
-            extra = f"   max principal angle to ours {e[angle]:.1e} rad" if angle else ""
-            print(f"  {label:<40} {e[key]:8.4f} s  {e[key] / e['ours_s']:6.2f}x ours{extra}")
-        print(f"  (Gram product alone {e['ours_gram_only_s']:.4f} s)")
-        print(
-            f"  ours vs sklearn full: {e['speedup_vs_sklearn_full']:.1f}x faster (target >= 10x: "
-            f"{'met' if e['speedup_vs_sklearn_full'] >= 10 else 'NOT met'})"
-        )
-        print(
-            f"  ours / pca_lowrank: {e['ratio_to_pca_lowrank']:.2f} (target <= 1.5: "
-            f"{'met' if e['ratio_to_pca_lowrank'] <= 1.5 else 'NOT met'})"
-        )
-        print(
-            f"  roofline: 2·N·P² = {flops / 1e9:.1f} GFLOP in {e['ours_s']:.3f} s = {e['achieved_gflops']:.1f} GFLOP/s, "
-            f"{100 * e['gemm_fraction']:.0f}% of GEMM"
-        )
-
-    cols = [
-        ("kind", "kind", "s"),
-        ("objects", "objects", "d"),
-        ("size", "size", "d"),
-        ("seconds", "seconds", ".3f"),
-        ("peak MiB", "peak_mib", ".1f"),
-        ("passes", "passes", "d"),
-        ("P·N·4 MiB", "data_matrix_mib", ".1f"),
-        ("min(P,N)²·8 MiB", "gram_mib", ".1f"),
-        ("held views MiB", "panel_mib", ".1f"),
-    ]
-    panel = 205  # views per panel of the exact Gram path (5 objects): memory is a panel plus P²
+        _section_eigen(results, args.root, quick, reps)
     if "scaling" in args.sections:
-        # Objects at 64x64 (N = 4096): 1,000 objects are P = 41,000 views, past N, where the
-        # exact fit folds the N×N scatter (at 128x128 that is 22 TFLOP, minutes, for any method).
-        objects_size = 64
-        s = results["scaling"] = bench_scaling(
-            [32, 64] if quick else [32, 64, 128, 256],
-            [5, 10, 20] if quick else [10, 30, 100, 300, 1000],
-            5 if quick else 20,
-            objects_size,
-            panel,
-        )
-        print(
-            "\n== scaling: seconds and extra peak resident memory of one fit, each in a fresh subprocess "
-            "(peak RSS sampled every ms, minus the RSS just before the fit; views generated on the fly "
-            f"count). explicit = Eigenspace on the stacked views; exact = StreamingEigenspace (Gram by "
-            f"panels of {panel} views when N > P, else the N×N scatter); randomized = range finder"
-        )
-        print("-- image size (objects fixed, 41 views each)")
-        print(_table(s["by_size"], cols))
-        print(f"-- number of objects ({objects_size}x{objects_size} views, 41 per object): P = 41 x objects")
-        print(_table(s["by_objects"], cols))
-
+        _section_scaling(results, quick)
     if "coil100" in args.sections:
-        n = 10 if quick else 100
-        c = results["coil100"] = bench_coil100(n, 1025, explicit=not quick)
-        print(
-            f"\n== COIL-100 sized build: {n} objects x 41 views x 3x128x128 synthetic (exact: panels of 1025 views;"
-            " pipeline: flow + synthesis of every object into a disk cache, then the exact Gram from it)"
-        )
-        print(_table(c, [*cols, ("workers", "workers", "d"), ("workers MiB", "workers_peak_mib", ".0f")]))
-        for row in c:
-            if row["kind"] == "pipeline":
-                where = (
-                    f"{row['workers']} worker processes"
-                    if row["workers"]
-                    else "in one process, torch's threads"
-                )
-                target = (
-                    f"target for 100 objects: 60 s, {'met' if row['seconds'] <= 60 else 'NOT met'}"
-                    if n == 100
-                    else "the 60 s target is for 100 objects"
-                )
-                print(
-                    f"  pipeline, {where}: {row['seconds']:.1f} s in all ({row['synthesis_s']:.1f} s flow + "
-                    f"synthesis), peak {row['peak_mib']:.0f} MiB here + {row['workers_peak_mib']:.0f} MiB in "
-                    f"workers ({target})"
-                )
-
+        _section_coil100(results, quick)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(results, fh, indent=2)
         print(f"\nwrote {args.json}")
     if args.png:
-        _plot(results, args.png)
+        plot_results(results, args.png)
         print(f"wrote {args.png}")
     return 0
 

@@ -21,7 +21,7 @@ import torch.nn.functional as F
 
 from torch_eigview.decomposition.streaming import CHUNK_VIEWS
 
-__all__ = ["bench_coil100", "bench_scaling", "smooth_views"]
+__all__ = ["bench_coil100", "bench_scaling", "run_case", "smooth_views"]
 
 
 def smooth_views(obj: int, n_views: int = 41, channels: int = 1, size: int = 128) -> torch.Tensor:
@@ -83,8 +83,8 @@ class _PeakRss:
     A thread samples /proc/self/statm every millisecond; ``ru_maxrss`` (the process's
     high-water mark) is used as well when the block raised it, so a short peak between two
     samples is not missed then. The baseline is the *current* resident set before the block,
-    not the earlier high-water mark (imports and warm-ups peak higher than they end, which
-    made ``ru_maxrss`` deltas read 0 for blocks that stayed below that earlier peak).
+    not the earlier high-water mark: imports and warm-ups peak higher than they end, and a
+    ``ru_maxrss`` delta reads 0 for a block that stays below that earlier peak.
     """
 
     def __enter__(self) -> _PeakRss:
@@ -128,7 +128,7 @@ class _PeakRss:
         return self.children_peak / 2**20
 
 
-def _worker(spec: dict[str, Any]) -> dict[str, Any]:
+def run_case(spec: dict[str, Any]) -> dict[str, Any]:
     """One measurement in this (fresh) process: seconds and extra peak RSS of one fit."""
     from torch_eigview.decomposition.eigenspace import Eigenspace
     from torch_eigview.decomposition.streaming import StreamingEigenspace
