@@ -39,13 +39,18 @@ def _components(text: str) -> int | float:
     )
 
 
-def _elevation(text: str) -> float | str:
-    if text == "auto":
+def _word_or_float(text: str, word: str, message: str) -> float | str:
+    """``word`` itself, or ``text`` as a float; ``message`` is the argparse error otherwise."""
+    if text == word:
         return text
     try:
         return float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--elevation must be 'auto' or degrees, got {text!r}") from None
+        raise argparse.ArgumentTypeError(message) from None
+
+
+def _elevation(text: str) -> float | str:
+    return _word_or_float(text, "auto", f"--elevation must be 'auto' or degrees, got {text!r}")
 
 
 def _objects(text: str) -> list[int]:
@@ -58,12 +63,7 @@ def _objects(text: str) -> list[int]:
 
 
 def _gamma(text: str) -> float | str:
-    if text == "median":
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--gamma must be a number > 0 or 'median', got {text!r}") from None
+    return _word_or_float(text, "median", f"--gamma must be a number > 0 or 'median', got {text!r}")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import torch
 import torch.distributed as dist
 
+from torch_eigview.nn.functional import unit_rows
 from torch_eigview.scale.distributed import fit_distributed
 
 __all__ = ["main"]
@@ -63,8 +64,7 @@ def _local_views(args: argparse.Namespace, rank: int, world: int) -> torch.Tenso
     if not blocks:
         return torch.empty(0, 1)
     x = torch.cat(blocks)
-    flat = x.flatten(1)  # unit L2 norm per view, as the COIL experiment does
-    return (flat / flat.norm(dim=1, keepdim=True).clamp_min(1e-12)).reshape(x.shape)
+    return unit_rows(x).reshape(x.shape)  # unit L2 norm per view, as the COIL experiment does
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -48,7 +48,7 @@ __all__ = [
 CORRESPONDENCES = ("flow", "exact", "rendered")
 # Synthetic renders: no camera tilt and no size normalization (COIL's defaults), and
 # scikit-image's own TV-L1 settings (5 warps of 10 iterations; ``flow_options={}``) rather
-# than the 3 × 5 speed preset, which was validated on COIL only: on these smooth textures
+# than the 3 × 5 speed preset, which is tuned on COIL only: on these smooth textures
 # the preset's flow costs up to 4 points of Fig. 2 (α = 30, two views: 94.67 % against 98.67 %).
 # Silhouette-aware sampling against the renders' exactly black background (shaded object
 # pixels go down to 0.004, below COIL's 0.05 threshold): without it every synthesized
