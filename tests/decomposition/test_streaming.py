@@ -91,6 +91,23 @@ def test_randomized_close_to_exact(shape: tuple[int, int]) -> None:
     assert space.n_passes_ == 6
 
 
+def test_fit_transform_fits_from_the_stream() -> None:
+    """fit_transform reads the source like fit, then projects it block by block (one pass more)."""
+    x = make_views(60, 200)
+    calls = []
+
+    def source():  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return (x[i : i + 10] for i in range(0, 60, 10))
+
+    space = StreamingEigenspace(5)
+    z = space.fit_transform(source)
+    assert not isinstance(space, Eigenspace)
+    assert len(calls) == 4 and space.n_passes_ == 4  # mean, Gram (one panel), components, projection
+    torch.testing.assert_close(z, space.transform(x), atol=1e-12, rtol=0)
+    torch.testing.assert_close(z, Eigenspace(5).fit_transform(x), atol=1e-10, rtol=0)
+
+
 def test_generator_source_is_called_per_pass() -> None:
     x = make_views(30, 50)
     calls = []

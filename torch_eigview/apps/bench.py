@@ -132,14 +132,15 @@ def bench_eigen(x: torch.Tensor, k: int, repeats: int) -> dict[str, Any]:
     """Ours (Gram) vs sklearn PCA full/randomized vs torch.pca_lowrank(q=k+10, niter=2)."""
     from sklearn.decomposition import PCA
 
-    from torch_eigview.decomposition.eigenspace import Eigenspace, _gram
+    from torch_eigview.decomposition.eigenspace import Eigenspace
+    from torch_eigview.decomposition.linalg import gram
 
     xn = x.numpy()
     ours = Eigenspace(k).fit(x)
     xc = x - x.mean(0)
     out: dict[str, Any] = {"P": x.shape[0], "N": x.shape[1], "k": k}
     out["ours_s"] = _best(lambda: Eigenspace(k).fit(x), repeats)
-    out["ours_gram_only_s"] = _best(lambda: _gram(xc), repeats)
+    out["ours_gram_only_s"] = _best(lambda: gram(xc), repeats)
     out["sklearn_full_s"] = _best(lambda: PCA(k, svd_solver="full").fit(xn), max(1, repeats // 3))
     out["sklearn_randomized_s"] = _best(
         lambda: PCA(k, svd_solver="randomized", random_state=0).fit(xn), repeats

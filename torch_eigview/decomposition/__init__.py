@@ -1,5 +1,5 @@
 """Decomposition: the eigenspace estimators (in memory, kernel, streaming) over one
-private linear-algebra core.
+internal linear-algebra core, :mod:`torch_eigview.decomposition.linalg` (not re-exported).
 """
 
 from __future__ import annotations

@@ -17,23 +17,14 @@ taking its PCA (an m×m eigenproblem) is exact kernel PCA of K̃, in P×m memory
 
 from __future__ import annotations
 
-import math
-import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.check import (
-    check_choice,
-    check_finite,
-    check_float_tensor,
-    check_kernel_params,
-    check_n_components,
-    check_ndim,
-)
-from torch_eigview.decomposition.eigenspace import Eigenspace
-from torch_eigview.errors import NotFittedError
+from torch_eigview.check import check_choice, check_finite, check_int, check_kernel_params
+from torch_eigview.decomposition._fitted import FittedEstimator, views_to_fit
+from torch_eigview.decomposition.linalg import choose_k, eigh_descending, numerical_rank, peak_signs
 from torch_eigview.nn.kernel_projection import KERNELS, KernelProjection, pairwise_kernel
 
 __all__ = ["KernelEigenspace"]
@@ -54,33 +45,28 @@ class _KernelFit:
     n_samples: int
     image_shape: tuple[int, int, int] | None
 
+    @property
+    def n_components(self) -> int:
+        """k."""
+        return self.coefficients.shape[1]
 
-def _positive_rank(eigvals: torch.Tensor, n: int, dtype: torch.dtype) -> int:
-    """How many of the descending ``eigvals`` lie above the rounding floor of an n×n kernel.
+    @property
+    def n_features(self) -> int:
+        """N."""
+        return self.vectors.shape[1]
 
-    A kernel matrix computed in ``dtype`` carries ~sqrt(n)·eps rounding relative to its
-    largest eigenvalue (as the Gram matrix in ``Eigenspace``); zero, negative and
-    noise-level eigenvalues are dropped before dividing by √λ.
-    """
-    if eigvals.numel() == 0 or float(eigvals[0]) <= 0:
-        return 0
-    tol = float(eigvals[0]) * math.sqrt(n) * torch.finfo(dtype).eps
-    return int((eigvals > tol).sum())
-
-
-def _descending_eigh(matrix: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """eigh of the symmetric part of a float64 matrix, eigenvalues descending."""
-    eigvals, eigvecs = torch.linalg.eigh((matrix + matrix.T) / 2)
-    return eigvals.flip(0), eigvecs.flip(1)
+    @property
+    def dtype(self) -> torch.dtype:
+        """The dtype of every tensor of the record."""
+        return self.vectors.dtype
 
 
-def _sign_of_peaks(scores: torch.Tensor) -> torch.Tensor:
-    """(k,) ±1 making each column's entry of largest magnitude positive (sklearn's ``svd_flip``)."""
-    peak = scores.gather(0, scores.abs().argmax(dim=0, keepdim=True))[0]
-    return torch.where(peak < 0, -1.0, 1.0).to(scores.dtype)
+def _eigh_symmetric(matrix: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """All eigenpairs of the symmetric part of a float64 (n, n) matrix, eigenvalues descending."""
+    return eigh_descending((matrix + matrix.T) / 2)
 
 
-class KernelEigenspace:
+class KernelEigenspace(FittedEstimator[_KernelFit]):
     """Kernel PCA of P views, fitted like a scikit-learn estimator.
 
     ``eigenvalues_`` are the eigenvalues λ of the centred kernel matrix (scikit-learn's
@@ -126,7 +112,7 @@ class KernelEigenspace:
         coef0: float = 1.0,
         nystrom: int | None = None,
     ) -> None:
-        self.n_components = check_n_components(n_components)
+        super().__init__(n_components)
         if callable(kernel) and not isinstance(kernel, str):
             self.kernel: str | KernelFn = kernel
         else:
@@ -142,16 +128,12 @@ class KernelEigenspace:
             if isinstance(gamma, str):
                 raise ValueError(f"gamma={gamma!r} must be None, 'median' or a number > 0")
             self.gamma, self.degree, self.coef0 = check_kernel_params(gamma, degree, coef0)
-        if nystrom is not None:
-            if isinstance(nystrom, bool) or not isinstance(nystrom, numbers.Integral):
-                raise TypeError(
-                    f"nystrom must be None or an int >= 1, got {type(nystrom).__name__} {nystrom!r}"
-                )
-            if nystrom < 1:
-                raise ValueError(f"nystrom={nystrom} must be >= 1 (the number of landmark views)")
-            nystrom = int(nystrom)
-        self.nystrom = nystrom
-        self._state: _KernelFit | None = None
+        try:  # None (exact kernel PCA) or the number of landmark views
+            self.nystrom = None if nystrom is None else check_int(nystrom, "nystrom", 1)
+        except TypeError:
+            raise TypeError(
+                f"nystrom must be None or an int >= 1, got {type(nystrom).__name__} {nystrom!r}"
+            ) from None
 
     def __repr__(self) -> str:
         kernel = self.kernel if isinstance(self.kernel, str) else getattr(self.kernel, "__name__", "callable")
@@ -165,11 +147,6 @@ class KernelEigenspace:
         return text + ")"
 
     # ------------------------------------------------------------------ fitted attributes
-    def _fitted(self, what: str) -> _KernelFit:
-        if self._state is None:
-            raise NotFittedError(f"this KernelEigenspace is not fitted yet: call fit before {what}")
-        return self._state
-
     @property
     def X_fit_(self) -> torch.Tensor:
         """(T, N) the views kernel rows are taken against: all P training views, or the m landmarks."""
@@ -186,11 +163,6 @@ class KernelEigenspace:
         return self._fitted("kernel_mean_").kernel_mean
 
     @property
-    def eigenvalues_(self) -> torch.Tensor:
-        """(k,) eigenvalues of the centred (exact or Nyström) kernel matrix, descending."""
-        return self._fitted("eigenvalues_").eigenvalues
-
-    @property
     def gamma_(self) -> float:
         """The γ used (1/N when ``gamma`` was None, 1/median when "median")."""
         return self._fitted("gamma_").gamma
@@ -204,26 +176,6 @@ class KernelEigenspace:
     def w_inv_sqrt_(self) -> torch.Tensor | None:
         """(m, r) W^{-1/2} on the landmark kernel's positive eigenspace (Nyström), or None."""
         return self._fitted("w_inv_sqrt_").w_inv_sqrt
-
-    @property
-    def n_components_(self) -> int:
-        """k, the number of components kept."""
-        return self._fitted("n_components_").coefficients.shape[1]
-
-    @property
-    def n_samples_(self) -> int:
-        """P, the number of views fitted."""
-        return self._fitted("n_samples_").n_samples
-
-    @property
-    def n_features_in_(self) -> int:
-        """N, the number of values per view."""
-        return self._fitted("n_features_in_").vectors.shape[1]
-
-    @property
-    def image_shape_(self) -> tuple[int, int, int] | None:
-        """(C, H, W) when fitted on (P, C, H, W) views, else None."""
-        return self._fitted("image_shape_").image_shape
 
     # ------------------------------------------------------------------ kernels
     def _kernel(self, x: torch.Tensor, y: torch.Tensor, gamma: float, name: str) -> torch.Tensor:
@@ -267,7 +219,7 @@ class KernelEigenspace:
             ValueError: bad shape, P < 2, non-finite values, ``nystrom`` > P, or an int
                 ``n_components`` larger than the number of positive eigenvalues.
         """
-        x, image_shape = Eigenspace._check_views_to_fit(X)
+        x, image_shape = views_to_fit(X)
         with torch.no_grad():
             if self.nystrom is None:
                 self._state = self._fit_exact(x, image_shape)
@@ -280,17 +232,14 @@ class KernelEigenspace:
         return self.fit(X)._fitted("fit_transform").scores
 
     def _choose_k(self, eigvals: torch.Tensor, rank: int, what: str) -> int:
-        if rank == 0:
-            raise ValueError(f"the centred {what} has no positive eigenvalue: all views look the same to it")
-        if isinstance(self.n_components, int):
-            if self.n_components > rank:
-                raise ValueError(
-                    f"n_components={self.n_components} exceeds the number of positive eigenvalues "
-                    f"of the centred {what} ({rank})"
-                )
-            return self.n_components
-        cumulative = torch.cumsum(eigvals[:rank], 0) / eigvals[:rank].sum()
-        return min(int((cumulative < self.n_components).sum()) + 1, rank)
+        return choose_k(
+            self.n_components,
+            eigvals,
+            eigvals[:rank].sum(),
+            rank,
+            empty=f"the centred {what} has no positive eigenvalue: all views look the same to it",
+            bound=f"the number of positive eigenvalues of the centred {what} ({rank})",
+        )
 
     def _fit_exact(self, x: torch.Tensor, image_shape: tuple[int, int, int] | None) -> _KernelFit:
         n_views, n_features = x.shape
@@ -300,8 +249,8 @@ class KernelEigenspace:
         k = self._kernel(x, x, gamma, "X, X").double()
         kernel_mean = k.mean(dim=0)
         k_c = k - kernel_mean[None, :] - kernel_mean[:, None] + kernel_mean.mean()
-        eigvals, eigvecs = _descending_eigh(k_c)
-        rank = _positive_rank(eigvals, max(n_views, n_features), x.dtype)
+        eigvals, eigvecs = _eigh_symmetric(k_c)
+        rank = numerical_rank(eigvals, n_views, n_features, x.dtype)
         n_keep = self._choose_k(eigvals, rank, "kernel matrix")
         eigvals = eigvals[:n_keep]
         # Eigenvectors of K_c with λ > 0 are orthogonal to the constant vector (K_c 1 = 0);
@@ -310,7 +259,7 @@ class KernelEigenspace:
         alphas = eigvecs[:, :n_keep]
         alphas = alphas - alphas.mean(dim=0)
         scores = alphas * eigvals.sqrt()
-        sign = _sign_of_peaks(scores)
+        sign = peak_signs(scores, dim=0)
         return _KernelFit(
             vectors=x.clone(),
             coefficients=(alphas * sign / eigvals.sqrt()).to(x.dtype).contiguous(),
@@ -333,8 +282,8 @@ class KernelEigenspace:
         index = torch.linspace(0, n_views - 1, m, dtype=torch.float64).round().long().to(x.device)
         landmarks = x[index].clone()
         gamma = self._resolve_gamma(landmarks)
-        w_vals, w_vecs = _descending_eigh(self._kernel(landmarks, landmarks, gamma, "L, L").double())
-        r = _positive_rank(w_vals, max(m, n_features), x.dtype)
+        w_vals, w_vecs = _eigh_symmetric(self._kernel(landmarks, landmarks, gamma, "L, L").double())
+        r = numerical_rank(w_vals, m, n_features, x.dtype)
         if r == 0:
             raise ValueError("the landmark kernel matrix W has no positive eigenvalue")
         # W⁺ restricted to W's positive eigenspace, so Φ Φᵀ = C W⁺ Cᵀ.
@@ -342,12 +291,12 @@ class KernelEigenspace:
         c = self._kernel(x, landmarks, gamma, "X, L").double()  # (P, m): the only P-sized matrix
         kernel_mean = c.mean(dim=0)
         features = (c - kernel_mean) @ w_inv_sqrt  # centred Φ, (P, r)
-        eigvals, eigvecs = _descending_eigh(features.T @ features)
-        rank = _positive_rank(eigvals, max(m, n_features), x.dtype)
+        eigvals, eigvecs = _eigh_symmetric(features.T @ features)
+        rank = numerical_rank(eigvals, m, n_features, x.dtype)
         n_keep = self._choose_k(eigvals, rank, "Nyström kernel matrix")
         eigvals, axes = eigvals[:n_keep], eigvecs[:, :n_keep]
         scores = features @ axes  # = K̃_c α/√λ for the training views
-        sign = _sign_of_peaks(scores)
+        sign = peak_signs(scores, dim=0)
         return _KernelFit(
             vectors=landmarks,
             coefficients=(w_inv_sqrt @ axes * sign).to(x.dtype).contiguous(),
@@ -363,16 +312,7 @@ class KernelEigenspace:
 
     # ------------------------------------------------------------------ inference
     def _check_views(self, X: object, fit: _KernelFit) -> torch.Tensor:
-        x = check_float_tensor(X, "X")
-        check_ndim(x, "X", (2, 4), "(P, N) or (P, C, H, W)")
-        n_features = fit.vectors.shape[1]
-        if math.prod(x.shape[1:]) != n_features:
-            expected = f"(P, {n_features})"
-            if fit.image_shape is not None:
-                expected += f" or (P, {', '.join(map(str, fit.image_shape))})"
-            raise ValueError(f"X must have shape {expected} as fitted, got shape {tuple(x.shape)}")
-        if x.dtype != fit.vectors.dtype:
-            raise TypeError(f"X must have the fitted dtype {fit.vectors.dtype}, got {x.dtype}")
+        x = self._check_fitted_views(X, fit)
         check_finite(x, "X")
         return x.detach().reshape(x.shape[0], -1)
 

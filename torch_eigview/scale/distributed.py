@@ -32,8 +32,14 @@ import torch
 import torch.distributed as dist
 
 from torch_eigview.check import check_n_components
-from torch_eigview.decomposition.eigenspace import Eigenspace, _eigh_descending, _Fit, _flip_signs
-from torch_eigview.decomposition.streaming import above_tolerance, randomized_passes, select_k
+from torch_eigview.decomposition.eigenspace import Eigenspace
+from torch_eigview.decomposition.linalg import (
+    EigenFit,
+    leading_eigenpairs,
+    randomized_passes,
+    sketch_components,
+    sketch_matrix,
+)
 
 __all__ = ["fit_distributed"]
 
@@ -78,6 +84,77 @@ def _collective(rank: int, what: str, fn: Callable[..., object], *args: object, 
         raise
 
 
+def _shard_layout(
+    views: object, rank: int, group: dist.ProcessGroup | None
+) -> tuple[list[int], tuple[int, ...]]:
+    """Every rank's view count and the common view shape, from one ``all_gather_object``.
+
+    Raises:
+        ValueError: on every rank alike, when any rank's views are bad or differ in view
+            shape or dtype from rank 0's, or P < 2 over all ranks.
+    """
+    problem = _local_problem(views)
+    meta = None
+    if problem is None:
+        assert isinstance(views, torch.Tensor)
+        meta = (int(views.shape[0]), tuple(int(s) for s in views.shape[1:]), str(views.dtype))
+    gathered: list[object] = [None] * dist.get_world_size(group)
+    _collective(
+        rank,
+        "the all_gather of the shards' shapes",
+        dist.all_gather_object,
+        gathered,
+        (problem, meta),
+        group=group,
+    )
+    records: list[tuple[str | None, tuple[int, tuple[int, ...], str] | None]] = gathered  # type: ignore[assignment]
+    errors = [f"rank {r}: {p}" for r, (p, _) in enumerate(records) if p is not None]
+    if errors:
+        raise ValueError("fit_distributed got bad views: " + "; ".join(errors))
+    metas = [m for _, m in records if m is not None]
+    first = metas[0]
+    for r, m in enumerate(metas):
+        if m[1:] != first[1:]:
+            raise ValueError(
+                f"fit_distributed needs the same view shape and dtype on every rank: rank 0 has "
+                f"(P_r, {', '.join(map(str, first[1]))}) {first[2]}, rank {r} has (P_r, {', '.join(map(str, m[1]))}) {m[2]}"
+            )
+    counts = [m[0] for m in metas]
+    if sum(counts) < 2:
+        raise ValueError(f"fit_distributed needs at least 2 views over all ranks, got P={sum(counts)}")
+    return counts, first[1]
+
+
+def _exact(
+    xc: torch.Tensor,
+    counts: list[int],
+    rank: int,
+    group: dist.ProcessGroup | None,
+    n_components: int | float,
+    mean64: torch.Tensor,
+    all_reduce: Callable[[torch.Tensor], torch.Tensor],
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Eigenvalues (k,), components (k, N) and trace () of all ranks' views from this rank's
+    centred (P_r, N) shard ``xc``: the Gram matrix by shard broadcasts, then one eigh."""
+    n_views, n_features = sum(counts), xc.shape[1]
+    offsets = [sum(counts[:r]) for r in range(len(counts))]
+    lo, hi = offsets[rank], offsets[rank] + counts[rank]
+    gram = torch.zeros(n_views, n_views, dtype=torch.float64, device=xc.device)
+    for src in range(len(counts)):
+        other = xc if src == rank else xc.new_empty(counts[src], n_features)
+        root = dist.get_global_rank(group, src) if group else src
+        _collective(
+            rank, f"the broadcast of rank {src}'s shard", dist.broadcast, other, src=root, group=group
+        )
+        gram[lo:hi, offsets[src] : offsets[src] + counts[src]] = (xc @ other.T).double()
+        del other
+    gram = all_reduce(gram)
+    gram = (gram + gram.T) / 2  # the two halves came from different ranks' products
+    eigvals, basis, total = leading_eigenpairs(gram, n_components, mean64, n_views, xc.dtype, "views")
+    partial = (basis[lo:hi].T.to(xc.dtype) @ xc).double()
+    return eigvals, all_reduce(partial) / eigvals.sqrt()[:, None], total
+
+
 def fit_distributed(
     views: torch.Tensor,
     n_components: int | float = 15,
@@ -100,7 +177,7 @@ def fit_distributed(
             iterations and the seed of Ω.
 
     Returns:
-        A fitted ``Eigenspace``, the same on every rank.
+        A fitted ``Eigenspace`` (:meth:`Eigenspace.from_fit`), the same on every rank.
 
     Raises:
         RuntimeError: torch.distributed is not initialized, or a collective failed because
@@ -108,50 +185,20 @@ def fit_distributed(
         TimeoutError: a collective did not complete within the process group's timeout
             (``init_process_group(timeout=...)``): a rank stalled or died.
         ValueError: on every rank, when any rank has no views, bad or non-finite views, or
-            a view shape or dtype different from rank 0's; ``n_components`` above the rank.
+            a view shape or dtype different from rank 0's; ``n_components`` above the rank,
+            or an energy fraction the randomized sketch does not reach.
     """
     if not dist.is_available() or not dist.is_initialized():
         raise RuntimeError("fit_distributed needs torch.distributed initialized (init_process_group)")
     n_components = check_n_components(n_components)
     if method not in _METHODS:
         raise ValueError(f"method={method!r} must be one of {_METHODS}")
-    rank, world = dist.get_rank(group), dist.get_world_size(group)
-    problem = _local_problem(views)
-    meta = None
-    if problem is None:
-        meta = (int(views.shape[0]), tuple(int(s) for s in views.shape[1:]), str(views.dtype))
-    gathered: list[object] = [None] * world
-    _collective(
-        rank,
-        "the all_gather of the shards' shapes",
-        dist.all_gather_object,
-        gathered,
-        (problem, meta),
-        group=group,
-    )
-    records: list[tuple[str | None, tuple[int, tuple[int, ...], str] | None]] = gathered  # type: ignore[assignment]
-    errors = [f"rank {r}: {p}" for r, (p, _) in enumerate(records) if p is not None]
-    if errors:
-        raise ValueError("fit_distributed got bad views: " + "; ".join(errors))
-    metas = [m for _, m in records if m is not None]
-    first = metas[0]
-    for r, m in enumerate(metas):
-        if m[1:] != first[1:]:
-            raise ValueError(
-                f"fit_distributed needs the same view shape and dtype on every rank: rank 0 has "
-                f"(P_r, {', '.join(map(str, first[1]))}) {first[2]}, rank {r} has (P_r, {', '.join(map(str, m[1]))}) {m[2]}"
-            )
-    counts = [m[0] for m in metas]
+    rank = dist.get_rank(group)
+    counts, feature_shape = _shard_layout(views, rank, group)
     n_views = sum(counts)
-    if n_views < 2:
-        raise ValueError(f"fit_distributed needs at least 2 views over all ranks, got P={n_views}")
-    offsets = [sum(counts[:r]) for r in range(world)]
-    lo, hi = offsets[rank], offsets[rank] + counts[rank]
-    feature_shape = first[1]
     image_shape = (feature_shape[0], feature_shape[1], feature_shape[2]) if len(feature_shape) == 3 else None
     dtype = views.dtype
     x = views.detach().reshape(views.shape[0], -1)
-    n_features = x.shape[1]
 
     def all_reduce(t: torch.Tensor) -> torch.Tensor:
         _collective(rank, "an all_reduce", dist.all_reduce, t, group=group)
@@ -159,47 +206,16 @@ def fit_distributed(
 
     with torch.no_grad():
         mean64 = all_reduce(x.double().sum(dim=0)) / n_views
-        xc = x - mean64.to(dtype)
         if method == "randomized":
-            k_max = n_components if isinstance(n_components, int) else min(n_views, n_features)
-            width = min(k_max + oversample, n_views, n_features)
-            gen = torch.Generator(device="cpu").manual_seed(seed)
-            omega = torch.randn(n_views, width, generator=gen, dtype=torch.float64).to(x.device)
-            q, z, total = randomized_passes([x], mean64, omega, n_iter, all_reduce, row_offset=lo)
-            _, s, wt = torch.linalg.svd(z, full_matrices=False)
-            eigvals = s.square()
-            k = select_k(
-                n_components, above_tolerance(eigvals, total, mean64, n_views, dtype), total, "views", n_views
+            omega = sketch_matrix(n_components, oversample, n_views, x.shape[1], seed, x.device)
+            q, z, total = randomized_passes(
+                [x], mean64, omega, n_iter, all_reduce, row_offset=sum(counts[:rank])
             )
-            components = wt[:k] @ q.T
+            eigvals, components = sketch_components(
+                q, z, total, n_components, mean64, n_views, dtype, "views"
+            )
         else:
-            gram = torch.zeros(n_views, n_views, dtype=torch.float64, device=x.device)
-            for src in range(world):
-                other = xc if src == rank else xc.new_empty(counts[src], n_features)
-                root = dist.get_global_rank(group, src) if group else src
-                _collective(
-                    rank, f"the broadcast of rank {src}'s shard", dist.broadcast, other, src=root, group=group
-                )
-                gram[lo:hi, offsets[src] : offsets[src] + counts[src]] = (xc @ other.T).double()
-                del other
-            gram = all_reduce(gram)
-            gram = (gram + gram.T) / 2  # the two halves came from different ranks' products
-            top = n_components if isinstance(n_components, int) else None
-            eigvals, basis = _eigh_descending(gram, top)
-            total = gram.diagonal().sum()
-            k = select_k(
-                n_components, above_tolerance(eigvals, total, mean64, n_views, dtype), total, "views", n_views
-            )
-            eigvals = eigvals[:k]
-            partial = (basis[lo:hi, :k].T.to(dtype) @ xc).double()
-            components = all_reduce(partial) / eigvals.sqrt()[:, None]
-    space = Eigenspace(n_components)
-    space._state = _Fit(
-        mean=mean64.to(dtype),
-        components=_flip_signs(components.to(dtype).contiguous()),
-        eigenvalues=eigvals[:k].to(dtype),
-        ratio=(eigvals[:k] / total).to(dtype),
-        n_samples=n_views,
-        image_shape=image_shape,
-    )
-    return space
+            xc = x - mean64.to(dtype)
+            eigvals, components, total = _exact(xc, counts, rank, group, n_components, mean64, all_reduce)
+    fit = EigenFit.from_eigenpairs(mean64, components, eigvals, total, n_views, image_shape, dtype)
+    return Eigenspace.from_fit(fit, n_components)
