@@ -194,7 +194,9 @@ def test_exact_correspondence_is_consistent(camera: object) -> None:
 def test_bad_input() -> None:
     with pytest.raises(ValueError, match=r"name='teapot' must be one of \('head', 'ellipsoid', 'egg'"):
         make_object("teapot")
-    with pytest.raises(ValueError, match=r"name='fisheye' must be one of \('orthographic', 'affine', 'perspective'\)"):
+    with pytest.raises(
+        ValueError, match=r"name='fisheye' must be one of \('orthographic', 'affine', 'perspective'\)"
+    ):
         make_camera("fisheye")
     with pytest.raises(ValueError, match=r"size=.*positive"):
         OrthographicCamera(0)
