@@ -30,7 +30,7 @@ import time
 import torch
 
 from torch_eigview.apps.synthetic_scene import SYNTHETIC_OPTIONS
-from torch_eigview.datasets.renderer import OrthographicCamera, exact_correspondence, make_object, render
+from torch_eigview.datasets import OrthographicCamera, exact_correspondence, make_object, render
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.synthesis import PairGeometry, synthesize_views
 

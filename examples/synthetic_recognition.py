@@ -23,7 +23,7 @@ import json
 import time
 
 from torch_eigview.apps.demo import SyntheticScene, default_camera, format_table, recognition_experiment
-from torch_eigview.datasets.renderer import CAMERAS
+from torch_eigview.datasets import CAMERAS
 
 # Fig. 2(ii): (alpha, N) -> total accuracy (%).
 PAPER = {(5.0, 2): 100.0, (10.0, 2): 100.0, (15.0, 2): 99.33, (20.0, 2): 96.44, (30.0, 2): 93.77,

@@ -142,7 +142,7 @@ def warp_errors(
     """Mean absolute error per angle of ``warp``'s views from renders at 0 and ``alpha``
     against renders at ``thetas``, over the pixels both seed views see (the paper's
     per-pixel error; intensities in [0, 1])."""
-    from torch_eigview.datasets.renderer import render, seen_error
+    from torch_eigview.datasets import render, seen_error
     from torch_eigview.warp.novel_view import NovelViewWarp
 
     r1, r2 = render(obj, 0.0, camera), render(obj, alpha, camera)

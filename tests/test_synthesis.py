@@ -8,13 +8,13 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.datasets.renderer import (
+from torch_eigview.datasets import (
     OrthographicCamera,
     exact_correspondence,
     make_object,
     render_views,
 )
+from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.geometry.correspondence import estimate_correspondence
 from torch_eigview.synthesis import (
     PairGeometry,

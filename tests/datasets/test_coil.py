@@ -174,7 +174,9 @@ def test_bad_root_and_arguments(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match="root must be"):
         CoilFolder(3)  # type: ignore[arg-type]
     _rgb_folder(tmp_path)
-    with pytest.raises(ValueError, match="pose_unit must be one of"):
+    with pytest.raises(
+        ValueError, match=r"pose_unit='radians' must be one of \('auto', 'index', 'degrees'\)"
+    ):
         CoilFolder(tmp_path, pose_unit="radians")
     with pytest.raises(TypeError, match="dtype must be a floating"):
         CoilFolder(tmp_path, dtype=torch.int64)

@@ -172,7 +172,7 @@ def test_export_errors(tmp_path: Path) -> None:
     no_shape = EigenProjection(torch.zeros(48), torch.eye(48)[:2])
     with pytest.raises(ValueError, match="image_shape is None"):
         export_projection(no_shape, path)
-    with pytest.raises(ValueError, match="opset_version=17 must be at least 18"):
+    with pytest.raises(ValueError, match="opset_version=17 must be >= 18"):
         export_projection(make_projection(True), path, opset_version=17)
     with pytest.raises(TypeError, match="recognizer must be a NearestNeighborRecognizer"):
         export_recognizer(make_projection(True), path)  # type: ignore[arg-type]

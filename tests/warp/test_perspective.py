@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from torch_eigview.datasets.renderer import PerspectiveCamera, exact_correspondence_2d, make_object, render
+from torch_eigview.datasets import PerspectiveCamera, exact_correspondence_2d, make_object, render
 from torch_eigview.geometry.correspondence import correspondence_from_disparity
 from torch_eigview.warp.operator import SparseViewOperator
 from torch_eigview.warp.perspective import PerspectiveWarp, turntable_pose

@@ -246,7 +246,7 @@ def _run_demo(args: argparse.Namespace) -> int:
 
 def _run_synth(args: argparse.Namespace) -> int:
     from torch_eigview.apps.demo import run_synth
-    from torch_eigview.datasets.renderer import SHAPES
+    from torch_eigview.datasets import SHAPES
 
     shapes = SHAPES if args.shapes is None else tuple(args.shapes.split(","))
     unknown = sorted(set(shapes) - set(SHAPES))

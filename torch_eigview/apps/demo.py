@@ -1,6 +1,6 @@
 """The paper's synthetic recognition experiment (Sec. 5.1, Fig. 2) on the embedded objects.
 
-Five synthetic objects (:data:`~torch_eigview.datasets.renderer.SHAPES`) are rendered by the
+Five synthetic objects (:data:`~torch_eigview.datasets.shapes.SHAPES`) are rendered by the
 orthographic camera. Per object, two seed views (0° and α; three views at −α, 0°, α) give
 the views synthesized every 1° (Eq. 2, 7; :func:`~torch_eigview.synthesis.synthesize_views`
 with flow-estimated or exact correspondences); one eigenspace of 15 components spans all
@@ -26,7 +26,7 @@ from torch_eigview.apps.synthetic_scene import (
     synthesis_error,
     synthetic_gallery,
 )
-from torch_eigview.datasets.renderer import SHAPES, OrthographicCamera
+from torch_eigview.datasets import SHAPES, OrthographicCamera
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 

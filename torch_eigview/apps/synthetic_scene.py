@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import torch
 
 from torch_eigview.apps.protocol import angle_range
-from torch_eigview.datasets.renderer import (
+from torch_eigview.datasets import (
     CAMERAS,
     SHAPES,
     AffineCamera,
@@ -63,7 +63,7 @@ class SyntheticScene:
     """The objects and the camera of an experiment, with a cache of rendered views.
 
     Attributes:
-        shapes: object names (see :data:`~torch_eigview.datasets.renderer.SHAPES`).
+        shapes: object names (see :data:`~torch_eigview.datasets.shapes.SHAPES`).
         camera: the camera (orthographic by default; any :func:`default_camera`).
         seed: texture seed of every object.
     """
@@ -93,7 +93,7 @@ class SyntheticScene:
 def default_camera(name: str, size: int = 64) -> AffineCamera | PerspectiveCamera:
     """The camera of each model in ``eigview synth``.
 
-    ``"orthographic"``: the paper's (:func:`~torch_eigview.datasets.renderer.OrthographicCamera`).
+    ``"orthographic"``: the paper's (:func:`~torch_eigview.datasets.cameras.OrthographicCamera`).
     ``"affine"``: anisotropic scale (0.9 and 1.05 of the orthographic one), a start angle
     (x also sees 0.15·Z) and the rotation axis 2 pixels left of the centre column.
     ``"perspective"``: a pinhole at 4 object radii from the axis (the object spans about
@@ -116,7 +116,7 @@ def default_camera(name: str, size: int = 64) -> AffineCamera | PerspectiveCamer
 def _is_plain_orthographic(camera: AffineCamera | PerspectiveCamera) -> bool:
     if not isinstance(camera, AffineCamera):
         return False
-    ortho = OrthographicCamera((camera.height, camera.width), float(camera._m[0, 0]))
+    ortho = OrthographicCamera((camera.height, camera.width), float(camera.P[0, 0]))
     return bool(torch.equal(camera.P, ortho.P))
 
 

@@ -1,23 +1,23 @@
-"""Datasets: COIL folders and the synthetic renderer."""
+"""Datasets: COIL folders, the synthetic objects, their cameras and renderer, exact correspondences."""
 
 from __future__ import annotations
 
-from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
-from torch_eigview.datasets.renderer import (
+from torch_eigview.datasets.cameras import (
     CAMERAS,
     AffineCamera,
     OrthographicCamera,
     PerspectiveCamera,
-    Render,
+    make_camera,
+)
+from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
+from torch_eigview.datasets.correspondence import (
     ViewCorrespondence,
     exact_correspondence,
     exact_correspondence_2d,
-    make_camera,
-    render,
-    render_views,
     seen_error,
     view_correspondence,
 )
+from torch_eigview.datasets.renderer import Render, render, render_views
 from torch_eigview.datasets.shapes import SHAPES, SyntheticObject, make_object
 
 __all__ = [

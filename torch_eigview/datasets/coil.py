@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from torch_eigview.check import as_angle_tensor
-from torch_eigview.io.images import read_image
+from torch_eigview.check import as_angle_tensor, check_choice
+from torch_eigview.io.images import read_image, to_unit_float
 
 __all__ = ["CoilFolder", "parse_object_spec"]
 
@@ -78,7 +78,8 @@ class CoilFolder:
         dtype: Floating dtype of the returned tensors.
 
     Raises:
-        TypeError: ``root`` is not a path or ``dtype`` is not a floating dtype.
+        TypeError: ``root`` is not a path, ``pose_unit`` not a str or ``dtype`` not a
+            floating dtype.
         ValueError: ``root`` is not a folder or holds no COIL file, ``pose_unit`` is
             unknown, a pose lies outside ``[0, 360)`` degrees, two files name the same view,
             or the first image cannot be read.
@@ -91,8 +92,7 @@ class CoilFolder:
             raise TypeError(f"root must be a str or a path, got {type(root).__name__}")
         if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
             raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
-        if not isinstance(pose_unit, str) or pose_unit not in _POSE_UNITS:
-            raise ValueError(f"pose_unit must be one of {_POSE_UNITS}, got {pose_unit!r}")
+        pose_unit = check_choice(pose_unit, "pose_unit", _POSE_UNITS)
         self.root = Path(root)
         if not self.root.is_dir():
             raise ValueError(f"root={str(self.root)!r} must be an existing directory")
@@ -119,7 +119,7 @@ class CoilFolder:
                 raise ValueError(f"{path} and {views[step * p]} name the same view (object {obj})")
             views[step * p] = path
         first_path = min(found)[2]
-        first = _decode(first_path)
+        first = read_image(first_path)
         c, h, w = first.shape
         self.image_shape: tuple[int, int, int] = (c, h, w)
         self._cache: dict[Path, np.ndarray] = {first_path: first}
@@ -219,7 +219,7 @@ class CoilFolder:
     def _read(self, path: Path) -> np.ndarray:
         cached = self._cache.get(path)
         if cached is None:
-            cached = _decode(path)
+            cached = read_image(path)
             if cached.shape != self.image_shape:
                 raise ValueError(
                     f"image {path} must have shape (C, H, W)={self.image_shape} like the first image, "
@@ -231,14 +231,6 @@ class CoilFolder:
     def _to_tensor(self, arr: np.ndarray) -> torch.Tensor:
         # Cached arrays keep their file dtype (uint8 is 4x smaller than float32); converting
         # here also hands out a fresh tensor, so callers cannot alter the cache in place.
-        # Work in float32 at least: 65535 overflows float16.
+        # The pixels are those of ``eigview predict``, which converts with the same function.
         work = np.float64 if self.dtype == torch.float64 else np.float32
-        t = torch.from_numpy(arr.astype(work))
-        if arr.dtype.kind == "u":
-            t /= float(np.iinfo(arr.dtype).max)
-        return t.to(self.dtype)
-
-
-def _decode(path: Path) -> np.ndarray:
-    """Reads one file as a checked ``(C, H, W)`` array of its own dtype (alpha dropped)."""
-    return read_image(path)
+        return torch.from_numpy(to_unit_float(arr, work)).to(self.dtype)

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import torch
 
+from torch_eigview.check import check_choice, check_int
+
 __all__ = ["SHAPES", "SyntheticObject", "make_object"]
 
 Implicit = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
@@ -92,16 +94,16 @@ def _head() -> Implicit:
 
 # Every surface lies within the unit sphere.
 #
-# Five distinct outlines, and only the designated pair alike (the issue: "at least five
-# distinct shapes ..., two of them similar to each other"). The outline is the one cue a
-# turn about Y barely changes, so it is what tells objects apart at the test views up to
-# 25° beyond the ±20° gallery. The head is an upright oval (width/height 0.83 at θ = 0),
-# so the pair is slender (0.54) and the superquadric a squat, wide box (1.4); the
-# cylinder stays an upright rounded box (0.67). Mean silhouette IoU over θ = −40..40°:
-# ellipsoid–egg 0.90, every other pair 0.48–0.78. (With the pair as wide as the head,
-# width/height 0.69, and the superquadric an upright box of the head's size, head–egg
-# was 0.87 and head–superquadric 0.75: a second and third near-pair, which cost Fig. 2's
-# ceiling the head's views at ±43–45°.)
+# Five distinct outlines, and only the designated pair alike (Sec. 5.1 wants distinct
+# objects, two of them similar to each other). The outline is the one cue a turn about Y
+# barely changes, so it is what tells objects apart at the test views up to 25° beyond
+# the ±20° gallery. The head is an upright oval (width/height 0.83 at θ = 0), so the pair
+# is slender (0.54) and the superquadric a squat, wide box (1.4); the cylinder stays an
+# upright rounded box (0.67). Mean silhouette IoU over θ = −40..40°: ellipsoid–egg 0.90,
+# every other pair 0.48–0.78. A pair as wide as the head (width/height 0.69) and a
+# superquadric an upright box of the head's size would give head–egg 0.87 and
+# head–superquadric 0.75: a second and third near-pair, costing Fig. 2's ceiling the
+# head's views at ±43–45°.
 _SURFACES: dict[str, Implicit] = {
     "head": _head(),
     "ellipsoid": _ellipsoid((0.0, 0.0, 0.0), (0.5, 0.92, 0.42)),
@@ -197,14 +199,12 @@ def make_object(name: str, seed: int = 0, n_waves: int = 14) -> SyntheticObject:
         n_waves: number of plane waves in the texture.
 
     Raises:
+        TypeError: ``name`` is not a str, or ``seed`` or ``n_waves`` not an integer.
         ValueError: ``name`` is not a known shape or ``n_waves`` < 1.
     """
-    if name not in _SURFACES:
-        raise ValueError(f"unknown shape name={name!r}; known shapes: {', '.join(SHAPES)}")
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise TypeError(f"seed must be an int, got {type(seed).__name__}")
-    if n_waves < 1:
-        raise ValueError(f"n_waves={n_waves} must be at least 1")
+    name = check_choice(name, "name", SHAPES)
+    seed = check_int(seed, "seed")
+    n_waves = check_int(n_waves, "n_waves", minimum=1)
     gen = torch.Generator().manual_seed(1_000_003 * seed + 7919 * SHAPES.index(name) + 17)
     direction = torch.randn(n_waves, 3, generator=gen, dtype=torch.float64)
     direction = direction / direction.norm(dim=1, keepdim=True)

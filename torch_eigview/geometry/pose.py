@@ -74,7 +74,7 @@ def rotation_y(phi: torch.Tensor) -> torch.Tensor:
     """(..., 3, 3) rotations by ``phi`` (radians, (...,)) about the vertical axis Y.
 
     ``R(phi) @ (X, Y, Z) = (X cos + Z sin, Y, Z cos − X sin)``: the object turned by phi as
-    the camera sees it (the convention of :mod:`torch_eigview.datasets.renderer`).
+    the camera sees it (the convention of :mod:`torch_eigview.datasets.cameras`).
     """
     c, s = torch.cos(phi), torch.sin(phi)
     z, o = torch.zeros_like(phi), torch.ones_like(phi)

@@ -12,7 +12,7 @@ An :class:`EigenProjection` is exported in a folded form, ``z = x @ Wᵀ − (me
 export time. Any other module with ``image_shape`` and ``n_components`` (kernel PCA's
 ``KernelProjection``) is exported as it is.
 
-This file is ``torch_eigview/onnx.py``: inside the package ``import onnx`` still means the
+This file is ``torch_eigview/io/onnx.py``: inside the package ``import onnx`` means the
 onnx package (absolute imports); only running this file as a script would shadow it.
 """
 
@@ -28,6 +28,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from torch_eigview.check import check_int
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
@@ -197,9 +198,7 @@ def _prepare(model: object, fold: bool) -> tuple[nn.Module, OnnxModelInfo, tuple
         )
         return recognizer, info, RECOGNIZER_OUTPUTS
     shape = _image_shape(module)
-    n_components = getattr(module, "n_components", None)
-    if isinstance(n_components, bool) or not isinstance(n_components, int):
-        raise TypeError(f"{type(module).__name__} must have an int n_components, got {n_components!r}")
+    n_components = check_int(getattr(module, "n_components", None), f"{type(module).__name__}.n_components")
     exported = _projection_module(module, fold, torch.float32).eval()
     info = OnnxModelInfo(
         kind="projection",
@@ -235,14 +234,11 @@ def export_onnx(
         The metadata written into the graph's ``metadata_props``.
 
     Raises:
-        TypeError: ``model`` is not one of the above.
+        TypeError: ``model`` is not one of the above, or ``opset_version`` not an integer.
         ValueError: ``image_shape`` is unknown or ``opset_version`` is below 18.
         NotFittedError: ``model`` is an estimator that was not fitted.
     """
-    if isinstance(opset_version, bool) or not isinstance(opset_version, int):
-        raise TypeError(f"opset_version must be an int, got {type(opset_version).__name__}")
-    if opset_version < MIN_OPSET:
-        raise ValueError(f"opset_version={opset_version} must be at least {MIN_OPSET}")
+    opset_version = check_int(opset_version, "opset_version", minimum=MIN_OPSET)
     module, info, outputs = _prepare(model, fold)
     sample = torch.rand(2, *info.image_shape, generator=torch.Generator().manual_seed(0))
     program = torch.onnx.export(

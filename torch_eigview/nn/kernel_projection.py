@@ -13,21 +13,18 @@ Kernels follow ``sklearn.metrics.pairwise``: ``linear`` x·y, ``poly`` (γ x·y 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import torch
-from torch import nn
 
 from torch_eigview.check import (
     check_choice,
-    check_finite,
     check_float_tensor,
     check_image_shape,
     check_kernel_params,
     check_ndim,
-    check_view_input,
 )
-from torch_eigview.nn.functional import unit_rows
+from torch_eigview.nn._frozen import FrozenProjection, check_all_finite, check_eigenvalues, check_same_dtype
 
 __all__ = ["KERNELS", "KernelProjection", "pairwise_kernel"]
 
@@ -72,7 +69,7 @@ def pairwise_kernel(
     return torch.exp(-gamma * sq.clamp_min(0))
 
 
-class KernelProjection(nn.Module):
+class KernelProjection(FrozenProjection):
     """Projects views onto a frozen kernel eigenspace: ``z = (k(x, V) − k̄) @ A``.
 
     V are the T stored views (all training views, or the Nyström landmarks), A the (T, k)
@@ -117,7 +114,14 @@ class KernelProjection(nn.Module):
     coefficients: torch.Tensor
     kernel_mean: torch.Tensor
     vectors_sqnorm: torch.Tensor
-    eigenvalues: torch.Tensor
+    _STATE_KEYS: ClassVar[tuple[str, ...]] = (
+        "kernel",
+        "gamma",
+        "degree",
+        "coef0",
+        "image_shape",
+        "unit_norm",
+    )
 
     def __init__(
         self,
@@ -132,17 +136,15 @@ class KernelProjection(nn.Module):
         image_shape: tuple[int, int, int] | None = None,
         unit_norm: bool = False,
     ) -> None:
-        super().__init__()
         if callable(kernel) and not isinstance(kernel, str):
             raise TypeError(
                 "kernel must be a str, one of ('rbf', 'poly', 'cosine', 'linear'), got a callable: "
                 "a callable kernel cannot be exported to ONNX nor saved in a state_dict"
             )
-        self.kernel = check_choice(kernel, "kernel", KERNELS)
-        gamma, self.degree, self.coef0 = check_kernel_params(gamma, degree, coef0)
-        if not isinstance(unit_norm, bool):
-            raise TypeError(f"unit_norm must be a bool, got {type(unit_norm).__name__}")
-        self.unit_norm = unit_norm
+        kernel = check_choice(kernel, "kernel", KERNELS)
+        gamma, degree, coef0 = check_kernel_params(gamma, degree, coef0)
+        super().__init__(unit_norm)
+        self.kernel, self.degree, self.coef0 = kernel, degree, coef0
         for tensor, name, layout, ndim in (
             (vectors, "vectors", "(T, N)", 2),
             (coefficients, "coefficients", "(T, k)", 2),
@@ -162,28 +164,10 @@ class KernelProjection(nn.Module):
                 f"to match vectors of shape {tuple(vectors.shape)}, got {tuple(coefficients.shape)} "
                 f"and {tuple(kernel_mean.shape)}"
             )
-        if eigenvalues is None:
-            eigenvalues = vectors.new_empty(0)
-        else:
-            check_float_tensor(eigenvalues, "eigenvalues")
-            if tuple(eigenvalues.shape) != (coefficients.shape[1],):
-                raise ValueError(
-                    f"eigenvalues must have shape ({coefficients.shape[1]},), got {tuple(eigenvalues.shape)}"
-                )
-        for tensor, name in (
-            (coefficients, "coefficients"),
-            (kernel_mean, "kernel_mean"),
-            (eigenvalues, "eigenvalues"),
-        ):
-            if tensor.dtype != vectors.dtype:
-                raise TypeError(f"{name} must have dtype {vectors.dtype} like vectors, got {tensor.dtype}")
-        for tensor, name in (
-            (vectors, "vectors"),
-            (coefficients, "coefficients"),
-            (kernel_mean, "kernel_mean"),
-            (eigenvalues, "eigenvalues"),
-        ):
-            check_finite(tensor, name)
+        eigenvalues = check_eigenvalues(eigenvalues, coefficients.shape[1], vectors)
+        others = [(coefficients, "coefficients"), (kernel_mean, "kernel_mean"), (eigenvalues, "eigenvalues")]
+        check_same_dtype(others, vectors, "vectors")
+        check_all_finite([(vectors, "vectors"), *others])
         self.gamma = 1.0 / n_features if gamma is None else gamma
         self.image_shape = check_image_shape(image_shape, n_features, "image_shape")
         vectors = vectors.detach().clone(memory_format=torch.contiguous_format)
@@ -194,7 +178,7 @@ class KernelProjection(nn.Module):
         self.register_buffer("kernel_mean", kernel_mean.detach().clone())
         # ‖v‖² of the stored views, precomputed for rbf and cosine.
         self.register_buffer("vectors_sqnorm", vectors.square().sum(dim=1))
-        self.register_buffer("eigenvalues", eigenvalues.detach().clone().to(vectors.device))
+        self._register_eigenvalues(eigenvalues, vectors.device)
 
     @property
     def in_features(self) -> int:
@@ -211,71 +195,33 @@ class KernelProjection(nn.Module):
         """T, the number of stored views (training views or Nyström landmarks)."""
         return self.vectors.shape[0]
 
-    def _check_views(self, x: torch.Tensor) -> None:
-        check_view_input(x, self.in_features, self.image_shape, self.vectors.dtype)
-
-    def prepare(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, ...) views → (B, N) vectors as the kernel sees them (flattened, unit norm if set)."""
-        return unit_rows(x) if self.unit_norm else x.flatten(1)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Projects a batch of views onto the kernel eigenspace.
-
-        Args:
-            x: (B, C, H, W) or (B, N) views, with the buffers' dtype and device.
-
-        Returns:
-            (B, k) coordinates. Differentiable with respect to ``x``.
-
-        Raises:
-            ValueError: ``x`` does not have one of the accepted shapes.
-            TypeError: ``x`` is not a tensor of the buffers' dtype.
-        """
-        self._check_views(x)
+    def _project(self, v: torch.Tensor) -> torch.Tensor:
+        """(B, N) prepared views → (B, k) coordinates: kernel rows, centred, times A."""
         rows = pairwise_kernel(
-            self.prepare(x),
-            self.vectors,
-            self.kernel,
-            self.gamma,
-            self.degree,
-            self.coef0,
-            self.vectors_sqnorm,
+            v, self.vectors, self.kernel, self.gamma, self.degree, self.coef0, self.vectors_sqnorm
         )
         return (rows - self.kernel_mean) @ self.coefficients
 
     def get_extra_state(self) -> dict[str, Any]:
         """Saves the kernel, its parameters, ``image_shape`` and ``unit_norm`` (not tensors)."""
-        return {
+        kernel_state = {
             "kernel": self.kernel,
             "gamma": self.gamma,
             "degree": self.degree,
             "coef0": self.coef0,
-            "image_shape": self.image_shape,
-            "unit_norm": self.unit_norm,
         }
+        return {**kernel_state, **super().get_extra_state()}
 
-    def set_extra_state(self, state: Any) -> None:
-        """Restores what ``get_extra_state`` saved, validating it."""
-        keys = {"kernel", "gamma", "degree", "coef0", "image_shape", "unit_norm"}
-        if not isinstance(state, dict) or not keys <= set(state):
-            raise ValueError(f"extra state must be a dict with keys {sorted(keys)}, got {state!r}")
+    def _restore(self, state: dict[str, Any]) -> None:
         self.kernel = check_choice(state["kernel"], "kernel", KERNELS)
         gamma, self.degree, self.coef0 = check_kernel_params(state["gamma"], state["degree"], state["coef0"])
         self.gamma = 1.0 / self.in_features if gamma is None else gamma
-        self.image_shape = check_image_shape(state["image_shape"], self.in_features, "image_shape")
-        self.unit_norm = bool(state["unit_norm"])
+        super()._restore(state)
 
-    def extra_repr(self) -> str:
-        text = (
-            f"in_features={self.in_features}, n_components={self.n_components}, "
-            f"n_vectors={self.n_vectors}, kernel={self.kernel!r}"
-        )
+    def _describe(self) -> str:
+        text = f"{super()._describe()}, n_vectors={self.n_vectors}, kernel={self.kernel!r}"
         if self.kernel in ("rbf", "poly"):
             text += f", gamma={self.gamma:g}"
         if self.kernel == "poly":
             text += f", degree={self.degree}, coef0={self.coef0:g}"
-        if self.image_shape is not None:
-            text += f", image_shape={self.image_shape}"
-        if self.unit_norm:
-            text += ", unit_norm=True"
         return text

@@ -8,24 +8,15 @@ nothing data-dependent, nothing solved at inference time.
 
 from __future__ import annotations
 
-from typing import Any
-
 import torch
-from torch import nn
 
-from torch_eigview.check import (
-    check_finite,
-    check_float_tensor,
-    check_image_shape,
-    check_ndim,
-    check_view_input,
-)
-from torch_eigview.nn.functional import unit_rows
+from torch_eigview.check import check_float_tensor, check_image_shape, check_ndim
+from torch_eigview.nn._frozen import FrozenProjection, check_all_finite, check_eigenvalues, check_same_dtype
 
 __all__ = ["EigenProjection"]
 
 
-class EigenProjection(nn.Module):
+class EigenProjection(FrozenProjection):
     """Projects views onto a frozen eigenspace: ``z = (vec(x) - mean) @ components.T``.
 
     All state lives in persistent buffers (``mean``, ``components``, ``eigenvalues``);
@@ -57,7 +48,6 @@ class EigenProjection(nn.Module):
 
     mean: torch.Tensor
     components: torch.Tensor
-    eigenvalues: torch.Tensor
 
     def __init__(
         self,
@@ -67,10 +57,7 @@ class EigenProjection(nn.Module):
         image_shape: tuple[int, int, int] | None = None,
         unit_norm: bool = False,
     ) -> None:
-        super().__init__()
-        if not isinstance(unit_norm, bool):
-            raise TypeError(f"unit_norm must be a bool, got {type(unit_norm).__name__}")
-        self.unit_norm = unit_norm
+        super().__init__(unit_norm)
         check_float_tensor(mean, "mean")
         check_float_tensor(components, "components")
         check_ndim(mean, "mean", (1,), "(N,)")
@@ -83,28 +70,15 @@ class EigenProjection(nn.Module):
                 f"mean must have shape ({n_features},) to match components of shape "
                 f"{tuple(components.shape)}, got {tuple(mean.shape)}"
             )
-        if components.dtype != mean.dtype:
-            raise TypeError(f"components must have dtype {mean.dtype} like mean, got {components.dtype}")
-        if eigenvalues is None:
-            eigenvalues = mean.new_empty(0)
-        else:
-            check_float_tensor(eigenvalues, "eigenvalues")
-            if tuple(eigenvalues.shape) != (n_components,):
-                raise ValueError(
-                    f"eigenvalues must have shape ({n_components},), one per component, "
-                    f"got {tuple(eigenvalues.shape)}"
-                )
-            if eigenvalues.dtype != mean.dtype:
-                raise TypeError(
-                    f"eigenvalues must have dtype {mean.dtype} like mean, got {eigenvalues.dtype}"
-                )
-        for tensor, name in ((mean, "mean"), (components, "components"), (eigenvalues, "eigenvalues")):
-            check_finite(tensor, name)
+        check_same_dtype([(components, "components")], mean, "mean")
+        eigenvalues = check_eigenvalues(eigenvalues, n_components, mean)
+        check_same_dtype([(eigenvalues, "eigenvalues")], mean, "mean")
+        check_all_finite([(mean, "mean"), (components, "components"), (eigenvalues, "eigenvalues")])
         self.image_shape = check_image_shape(image_shape, n_features, "image_shape")
         # Copies, so that later in-place edits of the caller's tensors cannot reach the layer.
         self.register_buffer("mean", mean.detach().clone())
         self.register_buffer("components", components.detach().clone())
-        self.register_buffer("eigenvalues", eigenvalues.detach().clone().to(components.device))
+        self._register_eigenvalues(eigenvalues, components.device)
 
     @property
     def in_features(self) -> int:
@@ -116,28 +90,9 @@ class EigenProjection(nn.Module):
         """k, the dimension of the eigenspace."""
         return self.components.shape[0]
 
-    def _check_views(self, x: torch.Tensor) -> None:
-        check_view_input(x, self.in_features, self.image_shape, self.mean.dtype)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Projects a batch of views onto the eigenspace.
-
-        Args:
-            x: (B, C, H, W) or (B, N) views, with the buffers' dtype and device.
-
-        Returns:
-            (B, k) eigenspace coordinates. Differentiable with respect to ``x``.
-
-        Raises:
-            ValueError: ``x`` does not have one of the accepted shapes.
-            TypeError: ``x`` is not a tensor of the buffers' dtype.
-        """
-        self._check_views(x)
-        return (self.prepare(x) - self.mean) @ self.components.T
-
-    def prepare(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, ...) views → (B, N) vectors as the eigenspace sees them (flattened, unit norm if set)."""
-        return unit_rows(x) if self.unit_norm else x.flatten(1)
+    def _project(self, v: torch.Tensor) -> torch.Tensor:
+        """(B, N) prepared views → (B, k) coordinates: centre, then project."""
+        return (v - self.mean) @ self.components.T
 
     def reconstruct(self, z: torch.Tensor) -> torch.Tensor:
         """Maps eigenspace coordinates back to views: ``z @ components + mean``.
@@ -162,22 +117,3 @@ class EigenProjection(nn.Module):
         if self.image_shape is None:
             return views
         return views.unflatten(1, self.image_shape)
-
-    def get_extra_state(self) -> dict[str, Any]:
-        """Saves ``image_shape`` in ``state_dict`` (it is not a tensor, so not a buffer)."""
-        return {"image_shape": self.image_shape, "unit_norm": self.unit_norm}
-
-    def set_extra_state(self, state: Any) -> None:
-        """Restores ``image_shape`` from ``state_dict``, checking it against ``in_features``."""
-        if not isinstance(state, dict) or "image_shape" not in state:
-            raise ValueError(f"extra state must be a dict with key 'image_shape', got {state!r}")
-        self.image_shape = check_image_shape(state["image_shape"], self.in_features, "image_shape")
-        self.unit_norm = bool(state.get("unit_norm", False))
-
-    def extra_repr(self) -> str:
-        text = f"in_features={self.in_features}, n_components={self.n_components}"
-        if self.image_shape is not None:
-            text += f", image_shape={self.image_shape}"
-        if self.unit_norm:
-            text += ", unit_norm=True"
-        return text

@@ -5,7 +5,7 @@ Convention:
     vertical axis Y and the camera, at ``distance`` from the axis on the zc axis, looks at
     it; a point P is at ``X_cam = S·R_y(φ)·P + (0, 0, distance)`` with
     ``S = diag(1, −1, −1)`` (x right, y down, z forward) and is imaged at ``K·X_cam``
-    (:class:`~torch_eigview.datasets.renderer.PerspectiveCamera` renders exactly this). Images
+    (:class:`~torch_eigview.datasets.cameras.PerspectiveCamera` renders exactly this). Images
     are (C, H, W), x the column, y the row, pixel centres at integers.
 
 Every point moves in both coordinates, so each seed pixel's position in the novel view
@@ -123,7 +123,7 @@ class PerspectiveWarp(NovelViewWarp):
 
     The correspondences must be 2D: ``vertical_12`` and ``vertical_21`` set (as
     :func:`~torch_eigview.geometry.correspondence.estimate_correspondence` returns, or
-    :func:`~torch_eigview.datasets.renderer.exact_correspondence_2d`).
+    :func:`~torch_eigview.datasets.correspondence.exact_correspondence_2d`).
     """
 
     K: torch.Tensor

@@ -1,0 +1,146 @@
+"""What the frozen projection layers share: views in, coordinates out, settings as extra state.
+
+:class:`FrozenProjection` is the base of ``EigenProjection`` and ``KernelProjection``. It
+holds the ``unit_norm`` flag and the optional ``image_shape`` (saved in ``state_dict`` as
+extra state, since they are not tensors), the ``eigenvalues`` buffer, the input check and
+``prepare``. Each subclass registers its own buffers and defines ``in_features``,
+``n_components`` and ``_project``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import torch
+from torch import nn
+
+from torch_eigview.check import check_finite, check_float_tensor, check_image_shape, check_view_input
+from torch_eigview.nn.functional import unit_rows
+
+__all__ = ["FrozenProjection", "check_all_finite", "check_eigenvalues", "check_same_dtype"]
+
+
+def check_eigenvalues(
+    eigenvalues: torch.Tensor | None, n_components: int, reference: torch.Tensor
+) -> torch.Tensor:
+    """The (k,) ``eigenvalues`` checked for type and shape, or an empty (0,) tensor of
+    ``reference``'s dtype when they are None ("unknown"; the projection never uses them)."""
+    if eigenvalues is None:
+        return reference.new_empty(0)
+    check_float_tensor(eigenvalues, "eigenvalues")
+    if tuple(eigenvalues.shape) != (n_components,):
+        raise ValueError(
+            f"eigenvalues must have shape ({n_components},), one per component, got {tuple(eigenvalues.shape)}"
+        )
+    return eigenvalues
+
+
+def check_same_dtype(
+    tensors: Sequence[tuple[torch.Tensor, str]], reference: torch.Tensor, reference_name: str
+) -> None:
+    """Raises TypeError when a named tensor's dtype differs from ``reference``'s."""
+    for tensor, name in tensors:
+        if tensor.dtype != reference.dtype:
+            raise TypeError(
+                f"{name} must have dtype {reference.dtype} like {reference_name}, got {tensor.dtype}"
+            )
+
+
+def check_all_finite(tensors: Sequence[tuple[torch.Tensor, str]]) -> None:
+    """Raises ValueError at the first named tensor that holds NaN or infinite values."""
+    for tensor, name in tensors:
+        check_finite(tensor, name)
+
+
+class FrozenProjection(nn.Module):
+    """Base of the frozen projection layers: (B, C, H, W) or (B, N) views → (B, k) coordinates.
+
+    Args:
+        unit_norm: divide each input view by its L2 norm before projecting.
+
+    Raises:
+        TypeError: ``unit_norm`` is not a bool.
+    """
+
+    eigenvalues: torch.Tensor
+    image_shape: tuple[int, int, int] | None
+    # Keys ``set_extra_state`` requires; "unit_norm" may be missing (it then reads False).
+    _STATE_KEYS: ClassVar[tuple[str, ...]] = ("image_shape",)
+
+    def __init__(self, unit_norm: bool) -> None:
+        super().__init__()
+        if not isinstance(unit_norm, bool):
+            raise TypeError(f"unit_norm must be a bool, got {type(unit_norm).__name__}")
+        self.unit_norm = unit_norm
+
+    @property
+    def in_features(self) -> int:
+        """N, the number of values in one view."""
+        raise NotImplementedError
+
+    @property
+    def n_components(self) -> int:
+        """k, the dimension of the eigenspace."""
+        raise NotImplementedError
+
+    def _register_eigenvalues(self, eigenvalues: torch.Tensor, device: torch.device) -> None:
+        # A copy, so that later in-place edits of the caller's tensor cannot reach the layer.
+        self.register_buffer("eigenvalues", eigenvalues.detach().clone().to(device))
+
+    def _check_views(self, x: torch.Tensor) -> None:
+        # Every floating buffer has one dtype (checked at construction; .to() casts them together).
+        check_view_input(x, self.in_features, self.image_shape, self.eigenvalues.dtype)
+
+    def prepare(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, ...) views → (B, N) vectors as the eigenspace sees them (flattened, unit norm if set)."""
+        return unit_rows(x) if self.unit_norm else x.flatten(1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Projects a batch of views onto the eigenspace.
+
+        Args:
+            x: (B, C, H, W) or (B, N) views, with the buffers' dtype and device.
+
+        Returns:
+            (B, k) eigenspace coordinates. Differentiable with respect to ``x``.
+
+        Raises:
+            ValueError: ``x`` does not have one of the accepted shapes.
+            TypeError: ``x`` is not a tensor of the buffers' dtype.
+        """
+        self._check_views(x)
+        return self._project(self.prepare(x))
+
+    def _project(self, v: torch.Tensor) -> torch.Tensor:
+        """(B, N) prepared views → (B, k) coordinates."""
+        raise NotImplementedError
+
+    def get_extra_state(self) -> dict[str, Any]:
+        """Saves ``image_shape`` and ``unit_norm`` in ``state_dict`` (not tensors, so not buffers)."""
+        return {"image_shape": self.image_shape, "unit_norm": self.unit_norm}
+
+    def set_extra_state(self, state: Any) -> None:
+        """Restores what ``get_extra_state`` saved, checking ``image_shape`` against ``in_features``."""
+        keys = self._STATE_KEYS
+        if not isinstance(state, dict) or not set(keys) <= set(state):
+            what = f"key {keys[0]!r}" if len(keys) == 1 else f"keys {sorted(keys)}"
+            raise ValueError(f"extra state must be a dict with {what}, got {state!r}")
+        self._restore(state)
+
+    def _restore(self, state: dict[str, Any]) -> None:
+        """Sets the attributes from a checked extra state; subclasses restore theirs first."""
+        self.image_shape = check_image_shape(state["image_shape"], self.in_features, "image_shape")
+        self.unit_norm = bool(state.get("unit_norm", False))
+
+    def _describe(self) -> str:
+        """The sizes and settings ``extra_repr`` starts with."""
+        return f"in_features={self.in_features}, n_components={self.n_components}"
+
+    def extra_repr(self) -> str:
+        text = self._describe()
+        if self.image_shape is not None:
+            text += f", image_shape={self.image_shape}"
+        if self.unit_norm:
+            text += ", unit_norm=True"
+        return text
