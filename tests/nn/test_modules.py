@@ -173,9 +173,19 @@ CASES: dict[
 }
 
 
+# Base classes that only their subclasses complete (a method raises NotImplementedError);
+# each is checked through the covered classes derived from it.
+BASES = {"ViewWarp"}
+
+
 def test_every_module_class_has_a_case() -> None:
     covered = {cls for cls, _, _, _ in CASES.values()}
-    missing = sorted(c.__module__ + "." + c.__qualname__ for c in package_module_classes() - covered)
+    bases = {
+        c
+        for c in package_module_classes()
+        if c.__qualname__ in BASES and any(issubclass(sub, c) for sub in covered)
+    }
+    missing = sorted(c.__module__ + "." + c.__qualname__ for c in package_module_classes() - covered - bases)
     assert not missing, (
         f"nn.Module classes without a check_module case in tests/nn/test_modules.py: {missing}"
     )
