@@ -57,18 +57,28 @@ def check_module(
     batched_kwargs: Sequence[str] = (),
     empty_batch: bool = True,
     tol: dict[str, float] | None = None,
+    check_compile: bool = False,
+    check_export: bool = False,
 ) -> None:
     """Invariants every module of the package keeps.
 
     Checks that ``module(*inputs, **kwargs)``
 
     - leaves its input tensors unchanged (no in-place writes);
-    - returns the dtype and device of ``inputs[0]``;
+    - returns the dtype of ``inputs[0]`` in every floating output (integer outputs such as
+      labels or indices keep their integer dtype) and the device of ``inputs[0]`` in all;
     - on the whole batch equals the per-sample calls concatenated along dim 0;
     - works on an empty batch (B = 0) when ``empty_batch``;
     - gives the same output after a ``state_dict`` round trip (saved, loaded with
       ``weights_only=True`` into a copy whose tensors were zeroed) and after pickling the
-      whole module (``torch.save`` / ``torch.load(weights_only=False)``).
+      whole module (``torch.save`` / ``torch.load(weights_only=False)``);
+    - gives the same output through ``torch.compile(backend="eager")`` when ``check_compile``:
+      TorchDynamo captures ``forward`` into graphs (breaking the graph where Python must
+      see a value, such as a validation check) and runs them with the eager kernels, so
+      anything Dynamo traces wrongly shows up as a difference;
+    - gives the same output as one whole graph from ``torch.export.export`` when
+      ``check_export`` (no graph breaks allowed: no ``.item()``, no branching on data), the
+      property an ONNX export relies on.
 
     Args:
         module: the module under test, already on the inputs' device.
@@ -81,6 +91,12 @@ def check_module(
         empty_batch: also call the module with B = 0.
         tol: ``atol``/``rtol`` for the batched-vs-per-sample comparison; default
             ``torch.testing.assert_close``'s for the dtype. The round trips must be exact.
+        check_compile: also compare ``torch.compile(module, backend="eager")`` with eager; the
+            compiled call uses ``tol`` too, as Dynamo may reorder the arithmetic. Compiling
+            takes seconds for the warps, so ``tests/nn/test_modules.py`` runs it once per
+            module class rather than every caller on every parametrization.
+        check_export: also compare the ``torch.export`` program with eager (within ``tol``);
+            for modules whose arguments are all tensors.
     """
     kwargs = dict(kwargs or {})
     tol = dict(tol or {})
@@ -102,7 +118,8 @@ def check_module(
     _assert_same((inputs, kwargs), before, "inputs modified in place", atol=0.0, rtol=0.0)
 
     for t in _tensors(out):
-        assert t.dtype == first.dtype, f"output dtype {t.dtype} != input dtype {first.dtype}"
+        if t.is_floating_point():
+            assert t.dtype == first.dtype, f"output dtype {t.dtype} != input dtype {first.dtype}"
         assert t.device == first.device, f"output device {t.device} != input device {first.device}"
         assert t.shape[0] == n, f"output batch {t.shape[0]} != input batch {n}"
 
@@ -134,6 +151,17 @@ def check_module(
     unpickled = torch.load(buffer, weights_only=False, map_location=first.device)
     assert type(unpickled) is type(module) and repr(unpickled) == repr(module)
     _assert_same(call(unpickled), out, "pickle round trip", atol=0.0, rtol=0.0)
+
+    if check_compile:
+        # A fresh Dynamo cache: each module is compiled from scratch, so no earlier test's
+        # graphs (or its recompilation count) decide what this one runs.
+        torch._dynamo.reset()
+        compiled = torch.compile(module, backend="eager")
+        _assert_same(call(compiled), out, "torch.compile(backend='eager') != eager", **tol)
+
+    if check_export:
+        program = torch.export.export(module, tuple(inputs), kwargs)
+        _assert_same(call(program.module()), out, "torch.export != eager", **tol)
 
 
 def warp_errors(

@@ -1,4 +1,4 @@
-"""The examples run (quick settings), so they cannot rot."""
+"""The examples run (quick settings), so they cannot rot; every script at least imports."""
 
 from __future__ import annotations
 
@@ -8,15 +8,30 @@ from types import ModuleType
 
 import pytest
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+# Every script of examples/ and export/; each runs its work under ``if __name__ == "__main__"``.
+SCRIPTS = sorted([*EXAMPLES.glob("*.py"), *(ROOT / "export").glob("*.py")])
 
 
-def load(name: str) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+def load_path(path: Path) -> ModuleType:
+    """Imports a script as a module (its ``__name__`` is not ``"__main__"``: nothing runs)."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def load(name: str) -> ModuleType:
+    return load_path(EXAMPLES / f"{name}.py")
+
+
+@pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_script_imports(path: Path) -> None:
+    """The package names a script imports exist (they move when the package is reorganised)."""
+    module = load_path(path)
+    assert callable(getattr(module, "main", None)), f"{path.name} has no main()"
 
 
 @pytest.mark.coil

@@ -152,6 +152,7 @@ def test_bad_experiment_arguments(
     assert message in err
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_module_entry_point(coil_root: Path, tmp_path: Path) -> None:
     argv = [

@@ -223,6 +223,7 @@ def test_demo_small(tmp_path: object) -> None:
     assert result["accuracy"] == 100.0
 
 
+@pytest.mark.slow
 def test_rendered_gallery_is_the_ceiling() -> None:
     """``correspondences="rendered"``: the gallery is the rendered views at the gallery's
     angles (no synthesis): its codes are those of the renders, not of synthesized views,
@@ -249,6 +250,7 @@ def test_rendered_gallery_is_the_ceiling() -> None:
         recognition_experiment(10.0, 2, scene=scene, correspondences="true")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera", ["affine", "perspective"])
 def test_synth_protocol_per_camera(camera: str, capsys: pytest.CaptureFixture[str]) -> None:
     """`eigview synth --camera`: Fig. 2's protocol with each camera model's synthesis."""

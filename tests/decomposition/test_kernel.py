@@ -188,6 +188,7 @@ def test_module_state_dict_restores_kernel_and_repr() -> None:
     )
 
 
+@pytest.mark.slow
 def test_module_export_and_compile_equal_eager() -> None:
     module = make_module("rbf", torch.float32)
     batch = torch.export.Dim("batch")
@@ -199,6 +200,7 @@ def test_module_export_and_compile_equal_eager() -> None:
         torch.testing.assert_close(compiled(x), module(x))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kernel", ["rbf", "poly", "cosine"])
 def test_onnx_matches_eager(kernel: str, tmp_path: Path) -> None:
     onnxruntime = pytest.importorskip("onnxruntime")

@@ -65,6 +65,7 @@ def coil_model(folder: CoilFolder, tmp_path_factory: pytest.TempPathFactory) -> 
     return {"recognizer": result.recognizer, "dir": out, "images": images}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("unit_norm", [True, False], ids=["unit-norm", "raw"])
 @pytest.mark.parametrize("fold", [True, False], ids=["folded", "as-written"])
 def test_projection_matches_eager(tmp_path: Path, unit_norm: bool, fold: bool) -> None:
@@ -86,6 +87,7 @@ def test_projection_matches_eager(tmp_path: Path, unit_norm: bool, fold: bool) -
     torch.testing.assert_close(FoldedProjection(projection)(x), projection(x), atol=1e-6, rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_metadata_props_in_the_graph(tmp_path: Path) -> None:
     path = tmp_path / "p.onnx"
     export_projection(make_projection(True), path)
@@ -98,6 +100,7 @@ def test_metadata_props_in_the_graph(tmp_path: Path) -> None:
     assert model.opset_import[0].version >= 18 or any(o.version >= 18 for o in model.opset_import)
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_recognizer_matches_eager_on_coil(coil_model: dict[str, object]) -> None:
     out = Path(coil_model["dir"])  # type: ignore[arg-type]
@@ -121,6 +124,7 @@ def test_recognizer_matches_eager_on_coil(coil_model: dict[str, object]) -> None
     assert {"MatMul", "ArgMin"} <= ops and not ops & {"Loop", "Scan", "If"}
 
 
+@pytest.mark.slow
 def test_kernel_projection(tmp_path: Path) -> None:
     kernel_eigenspace = getattr(torch_eigview, "KernelEigenspace", None)
     if kernel_eigenspace is None or getattr(torch_eigview, "KernelProjection", None) is None:
@@ -215,6 +219,7 @@ def image_files(folder: CoilFolder, tmp_path_factory: pytest.TempPathFactory) ->
     return files
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_predict_without_torch(
     coil_model: dict[str, object], image_files: dict[str, Path], tmp_path: Path
@@ -247,6 +252,7 @@ def test_predict_without_torch(
     assert len(lines) == 3 and lines[0].startswith(good[0]) and f"label {records[0]['label']}" in lines[0]
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_predict_all_good_exits_zero(
     coil_model: dict[str, object], image_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
@@ -262,6 +268,7 @@ def _exit(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str
     return int(info.value.code), capsys.readouterr().err  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_predict_model_errors(
     coil_model: dict[str, object],
@@ -286,6 +293,7 @@ def test_predict_model_errors(
     assert code == 2 and "was not exported by torch_eigview" in err
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_export_command(
     coil_model: dict[str, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]

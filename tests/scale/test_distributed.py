@@ -87,6 +87,7 @@ def _max_angle(a: torch.Tensor, b: torch.Tensor) -> float:
     return float(torch.arccos(s.min()))
 
 
+@pytest.mark.slow
 def test_exact_equals_single_process(ranks: list[dict[str, object]]) -> None:
     ref = Eigenspace(K).fit(_data())
     for result in ranks:
@@ -98,6 +99,7 @@ def test_exact_equals_single_process(ranks: list[dict[str, object]]) -> None:
         torch.testing.assert_close(components, ref.components_, rtol=1e-6, atol=1e-6)  # same signs
 
 
+@pytest.mark.slow
 def test_randomized_equals_streaming(ranks: list[dict[str, object]]) -> None:
     ref = StreamingEigenspace(K, method="randomized", n_iter=3, seed=1).fit(_data())
     exact = Eigenspace(K).fit(_data())
@@ -109,6 +111,7 @@ def test_randomized_equals_streaming(ranks: list[dict[str, object]]) -> None:
         torch.testing.assert_close(eigvals, exact.eigenvalues_, rtol=1e-5, atol=0)
 
 
+@pytest.mark.slow
 def test_bad_input_raises_on_every_rank(ranks: list[dict[str, object]]) -> None:
     for result in ranks:
         assert "rank 1: views holds no views" in str(result["empty"])
@@ -145,6 +148,7 @@ def _stall_worker(rank: int, world: int, port: int, out: str) -> None:
         pass
 
 
+@pytest.mark.slow
 def test_collective_timeout_is_an_error_on_every_rank(tmp_path: Path) -> None:
     """A stalled rank: the waiting rank raises when the timeout passes, no hang; the stalled
     rank finds its peer gone and raises too."""

@@ -16,6 +16,7 @@ def seeds_of(n: int, size: int = 32) -> list[torch.Tensor]:
     return [smooth_views(o, 6, 3, size)[[0, 5]] for o in range(n)]
 
 
+@pytest.mark.slow
 def test_workers_equal_in_process_in_order() -> None:
     """Two spawned workers give exactly the in-process views, in the input order, for a
     generator input longer than the in-flight window (2 · workers)."""
@@ -36,6 +37,7 @@ def test_in_process_and_tensor_angles() -> None:
         assert torch.equal(got.views, synthesize_views(s, 5.0, THETAS).views)
 
 
+@pytest.mark.slow
 def test_worker_error_reaches_the_caller() -> None:
     """An object's ValueError in a worker is raised here, at that object's turn; the
     objects before it were yielded; nothing hangs."""
@@ -48,6 +50,7 @@ def test_worker_error_reaches_the_caller() -> None:
     assert len(got) == 1
 
 
+@pytest.mark.slow
 def test_stopping_early_shuts_the_pool() -> None:
     gen = synthesize_objects(seeds_of(5), 5.0, THETAS, workers=1)
     first = next(gen)
@@ -83,6 +86,7 @@ def test_bad_arguments_raise_before_any_process() -> None:
     assert list(synthesize_objects([], 5.0, THETAS, workers=2)) == []
 
 
+@pytest.mark.slow
 def test_shared_memory_stays_with_the_pool() -> None:
     """Seeds are copied before they are sent (sending moves a storage into shared memory,
     the caller's whole tensor with it) and results are copied out of it."""

@@ -376,6 +376,7 @@ def test_concat_errors() -> None:
         SparseViewOperator.concat([op, op32])
 
 
+@pytest.mark.slow
 def test_matches_kornia_at_coil_size_float32() -> None:
     """The issue's bar at a real image size: G·C and remap agree to 1e-5 in float32."""
     gen = torch.Generator().manual_seed(0)

@@ -74,6 +74,7 @@ def test_seed_views_are_reproduced(scene: tuple, camera: PerspectiveCamera) -> N
     torch.testing.assert_close(views[1], seeds[1], rtol=0, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_sparse_operator_gives_the_warped_views(scene: tuple, camera: PerspectiveCamera) -> None:
     """Sec. 4: G·C with whole-image coefficient vectors equals the kornia 2D warp."""
     _, seeds, corr = scene
