@@ -25,6 +25,8 @@ ALLOWED: dict[str, set[str]] = {
     "scale": {"base", "geometry", "warp", "synthesis", "nn", "decomposition"},
     "io": {"base", "nn"},
     "datasets": {"base", "geometry", "io"},
+    "method": {"base", "geometry", "warp", "synthesis", "nn", "decomposition"},
+    "sklearn": {"base", "geometry", "warp", "synthesis", "nn", "decomposition", "method"},
     "apps": {"base", "geometry", "warp", "synthesis", "nn", "decomposition", "scale", "io", "datasets"},
     "root": set(),  # the package's __init__ and __main__ import lazily or the command only
 }

@@ -1,0 +1,305 @@
+"""The whole method as one estimator: seed views per object in, eigenspace and gallery out.
+
+:class:`FewViewEigenspace` runs the recognition pipeline of the paper's experiments
+(Sec. 4; :mod:`torch_eigview.apps.experiment`) as a library object: per object, the
+correspondences of its seed views and the views synthesized over a range of angles
+(:func:`~torch_eigview.synthesis.synthesize_views`, Sec. 4.1 sectors for more than two
+seeds); one eigenspace over every object's gallery views, each scaled to unit L2 norm
+(Murase and Nayar's brightness normalization); the frozen projection layer; and the
+nearest-neighbour recognizer over the gallery's coordinates (Sec. 4.2).
+
+It follows scikit-learn's conventions: hyperparameters are stored as given by
+``__init__`` and validated by ``fit``, learned state ends in ``_``, ``fit`` returns self.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import torch
+
+from torch_eigview.check import check_int
+from torch_eigview.decomposition.eigenspace import Eigenspace
+from torch_eigview.decomposition.kernel import KernelEigenspace
+from torch_eigview.decomposition.streaming import StreamingEigenspace
+from torch_eigview.errors import NotFittedError
+from torch_eigview.method.inputs import (
+    Params,
+    block_item,
+    block_source,
+    check_angles,
+    check_labels,
+    check_seeds,
+    check_synth,
+    resolve_components,
+    seed_steps,
+    wrap_degrees,
+)
+from torch_eigview.nn.functional import unit_rows
+from torch_eigview.nn.kernel_projection import KernelProjection
+from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
+from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+
+__all__ = ["FewViewEigenspace"]
+
+Gallery = tuple[torch.Tensor, int, list[float]]  # (T, C, H, W) views, label, T poses (degrees)
+
+
+class FewViewEigenspace:
+    """The paper's method from seed views to a fitted eigenspace and a recognizer.
+
+    Args:
+        n_components: eigenspace dimension k (int), energy fraction (float in (0, 1)), or
+            None for every component above rounding (:data:`ALL_COMPONENTS`).
+        synth: (start, stop, step) of the synthesized angles in degrees, relative to each
+            object's first seed view, for two seeds (see ``synth_follows_seeds``); None
+            fits the seed views alone (the ``sparse`` baseline of the experiments).
+        options: :class:`~torch_eigview.synthesis.SynthesisOptions` (flow, elevation,
+            extent, blend, silhouette, …); None for the defaults.
+        unit_norm: scale every view to unit L2 norm before the eigenspace and in the layer.
+        kernel: None for the linear eigenspace (the paper's), or a
+            :class:`~torch_eigview.decomposition.kernel.KernelEigenspace` kernel name.
+        gamma: the kernel's γ (a number, "median" for rbf, or None: 1/N).
+        synth_follows_seeds: with more than two seeds, extend ``synth`` on the seeds'
+            side by the steps past the first pair (as ``CoilExperiment``).
+        max_views: the most gallery views :meth:`fit_blocks` holds at once.
+
+    Example:
+        >>> seeds = torch.rand(2, 2, 1, 16, 16)  # 2 objects, seed views at 0 and 10 degrees
+        >>> est = FewViewEigenspace(3, synth=None).fit(seeds, [0.0, 10.0], labels=[4, 7])
+        >>> est.predict(seeds[1]).labels.tolist()
+        [7, 7]
+    """
+
+    def __init__(
+        self,
+        n_components: int | float | None = 15,
+        *,
+        synth: tuple[float, float, float] | None = (-20.0, 20.0, 1.0),
+        options: SynthesisOptions | None = None,
+        unit_norm: bool = True,
+        kernel: str | None = None,
+        gamma: float | str | None = None,
+        synth_follows_seeds: bool = True,
+        max_views: int = 4096,
+    ) -> None:
+        self.n_components = n_components
+        self.synth = synth
+        self.options = options
+        self.unit_norm = unit_norm
+        self.kernel = kernel
+        self.gamma = gamma
+        self.synth_follows_seeds = synth_follows_seeds
+        self.max_views = max_views
+
+    def __repr__(self) -> str:
+        return f"FewViewEigenspace(n_components={self.n_components!r}, synth={self.synth!r}, kernel={self.kernel!r})"
+
+    def _params(self) -> Params:
+        n_components = resolve_components(self.n_components)
+        if self.options is not None and not isinstance(self.options, SynthesisOptions):
+            raise TypeError(f"options must be a SynthesisOptions or None, got {type(self.options).__name__}")
+        for name in ("unit_norm", "synth_follows_seeds"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"{name} must be a bool, got {getattr(self, name)!r}")
+        if self.kernel is not None:
+            KernelEigenspace(n_components, kernel=self.kernel, gamma=self.gamma)  # validates both
+        elif self.gamma is not None:
+            raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
+        return Params(
+            n_components,
+            check_synth(self.synth),
+            self.options or SynthesisOptions(),
+            self.unit_norm,
+            self.kernel,
+            self.gamma,
+            self.synth_follows_seeds,
+            check_int(self.max_views, "max_views", 1),
+        )
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, seeds: object, seed_angles: object, labels: object = None) -> FewViewEigenspace:
+        """Synthesizes every object's gallery from its seed views and fits on all of them.
+
+        Memory: the gallery views twice (P × N, and their unit-norm copy) plus the P×P
+        Gram matrix, P the gallery's views (41 per object for two seeds at the default
+        ``synth``); :meth:`fit_blocks` fits without holding them.
+
+        Args:
+            seeds: (O, V, C, H, W) seed views of O objects, or a sequence of O
+                (V_o, C, H, W) tensors (float32/float64).
+            seed_angles: the seed views' angles in degrees (absolute: the gallery poses
+                are these plus the synthesized offsets): V numbers shared by every object,
+                or one sequence per object. With ``synth``, V_o >= 2 and the angles are
+                equally spaced (either sign) or increasing (Sec. 4.1's α_n).
+            labels: O int labels, default 0 … O − 1.
+
+        Returns:
+            self, fitted: ``eigenspace_``, ``projection_``, ``recognizer_``,
+            ``gallery_labels_`` (P,), ``gallery_poses_`` (P,) wrapped to (−180, 180],
+            ``elevations_`` (per object, one per seed pair), ``image_shape_``.
+
+        Raises:
+            TypeError, ValueError: a bad hyperparameter or argument; the message names it.
+        """
+        params = self._params()
+        objects = check_seeds(seeds)
+        angles = check_angles(seed_angles, objects)
+        names = check_labels(labels, len(objects))
+        self.elevations_: list[list[float]] = []
+        views: list[torch.Tensor] = []
+        label_list: list[int] = []
+        poses: list[float] = []
+        for block, label, block_poses in self._galleries(params, objects, angles, names):
+            views.append(block)
+            label_list += [label] * len(block_poses)
+            poses += block_poses
+        x = torch.cat(views)
+        with torch.no_grad():
+            self._fit_gallery(params, x, torch.tensor(label_list), torch.tensor(poses, dtype=x.dtype))
+        return self
+
+    def _galleries(
+        self,
+        params: Params,
+        objects: list[torch.Tensor],
+        angles: list[list[float]],
+        labels: list[int],
+    ) -> Iterator[Gallery]:
+        """Per object its gallery views, label and poses; appends its elevations to ``elevations_``."""
+        for views, seed_angles, label in zip(objects, angles, labels, strict=True):
+            if params.synth is None:
+                yield views, label, seed_angles
+                continue
+            if views.shape[0] < 2:
+                raise ValueError(
+                    f"synthesis needs V >= 2 seed views per object, got V={views.shape[0]} (or synth=None)"
+                )
+            steps = seed_steps(seed_angles)
+            alpha: float | list[float] = steps[0] if len(set(steps)) == 1 else steps
+            thetas = params.thetas(steps)
+            out = synthesize_views(views, alpha, thetas, params.options)
+            self.elevations_.append(out.elevations)
+            yield out.views, label, [seed_angles[0] + t for t in thetas]
+
+    def _fit_gallery(
+        self, params: Params, x: torch.Tensor, labels: torch.Tensor, poses: torch.Tensor
+    ) -> None:
+        """The eigenspace of the gallery views x (P, C, H, W), the layer and the recognizer."""
+        c, h, w = x.shape[1:]
+        x_fit = unit_rows(x) if params.unit_norm else x.flatten(1)
+        projection: EigenProjection | KernelProjection
+        space: Eigenspace | KernelEigenspace
+        if params.kernel is None:
+            space = linear = Eigenspace(params.n_components).fit(x_fit)
+            projection = _linear_layer(linear, (c, h, w), params.unit_norm)
+        else:
+            kspace = KernelEigenspace(params.n_components, kernel=params.kernel, gamma=params.gamma)
+            space = kspace.fit(x_fit.reshape(-1, c, h, w))
+            projection = kspace.to_module(unit_norm=params.unit_norm)
+        recognizer = NearestNeighborRecognizer.from_views(projection, x, labels, wrap_degrees(poses))
+        self._set_fitted(space, projection, recognizer, (c, h, w))
+
+    def _set_fitted(
+        self,
+        space: Eigenspace | KernelEigenspace,
+        projection: EigenProjection | KernelProjection,
+        recognizer: NearestNeighborRecognizer,
+        image_shape: tuple[int, int, int],
+    ) -> None:
+        self.eigenspace_ = space
+        self.projection_ = projection
+        self.recognizer_ = recognizer
+        self.gallery_labels_ = recognizer.labels
+        self.gallery_poses_ = recognizer.poses
+        self.image_shape_ = image_shape
+
+    def fit_blocks(self, blocks: object) -> FewViewEigenspace:
+        """Fits on gallery views that arrive block by block, never all in memory.
+
+        The eigenspace is a :class:`~torch_eigview.decomposition.streaming.StreamingEigenspace`
+        (exact: equal to :meth:`fit`'s on the same views up to float rounding); a last
+        pass projects the blocks into the gallery. Nothing is synthesized: the blocks
+        are the gallery (real views, or views synthesized beforehand). Linear eigenspace
+        only (``kernel=None``).
+
+        Memory: the P×P float64 Gram matrix (the N×N scatter when N <= P), up to
+        ``max_views`` views at once, and the (P, k) gallery coordinates. Passes over
+        ``blocks``: 4 when P <= ``max_views`` (mean, Gram, components, gallery), one more
+        per further ``max_views`` views.
+
+        Args:
+            blocks: a ``DataLoader`` that does not shuffle, any re-iterable (a list) or a
+                callable returning a fresh iterable: every pass must yield the same views
+                in the same order. A one-shot iterator (a generator) is collected in
+                memory first. Each item: (B, C, H, W) views, or ``(views, labels)`` or
+                ``(views, labels, poses)`` with (B,) int labels and poses in degrees; a bare
+                tensor's views take the block's index as label and pose 0.
+
+        Returns:
+            self, fitted as by :meth:`fit` (``elevations_`` empty).
+        """
+        params = self._params()
+        if params.kernel is not None:
+            raise ValueError(
+                f"fit_blocks fits the linear eigenspace only: kernel must be None, got {params.kernel!r}"
+            )
+        source = block_source(blocks)
+
+        def prepared() -> Iterator[torch.Tensor]:
+            for i, item in enumerate(source()):
+                views = block_item(item, i)[0]
+                yield unit_rows(views).view(views.shape) if params.unit_norm else views
+
+        with torch.no_grad():
+            space = StreamingEigenspace(params.n_components, max_views=params.max_views).fit(prepared)
+            assert space.image_shape_ is not None  # the blocks are (B, C, H, W)
+            image_shape = space.image_shape_
+            projection = _linear_layer(space, image_shape, params.unit_norm)
+            codes, labels, poses = [], [], []
+            for i, item in enumerate(source()):
+                views, block_labels, block_poses = block_item(item, i)
+                codes.append(projection(views))
+                labels.append(block_labels)
+                poses.append(block_poses.to(views.dtype))
+            recognizer = NearestNeighborRecognizer(
+                projection, torch.cat(codes), torch.cat(labels), wrap_degrees(torch.cat(poses))
+            )
+        self.elevations_ = []
+        self._set_fitted(space, projection, recognizer, image_shape)
+        return self
+
+    # ------------------------------------------------------------------ inference
+    def _fitted(self, what: str) -> NearestNeighborRecognizer:
+        if not hasattr(self, "recognizer_"):
+            raise NotFittedError(
+                f"this FewViewEigenspace is not fitted yet: call fit or fit_blocks before {what}"
+            )
+        return self.recognizer_
+
+    def predict(self, views: torch.Tensor) -> Recognition:
+        """Recognizes (B, C, H, W) or (B, N) views: labels, poses, distances, gallery indices, each (B,)."""
+        return self._fitted("predict").predict(views)
+
+    def transform(self, views: torch.Tensor) -> torch.Tensor:
+        """(B, C, H, W) or (B, N) views → (B, k) eigenspace coordinates."""
+        projection = self._fitted("transform").projection
+        with torch.no_grad():
+            return projection(views)
+
+    def to_module(self, unit_norm: bool | None = None) -> EigenProjection | KernelProjection:
+        """A copy of the fitted layer; ``unit_norm`` (None: as fitted) sets whether it scales
+        each view to unit L2 norm first (False: the caller's views must be unit-norm already)."""
+        self._fitted("to_module")
+        unit = self.projection_.unit_norm if unit_norm is None else unit_norm
+        if isinstance(self.eigenspace_, KernelEigenspace):
+            return self.eigenspace_.to_module(unit_norm=unit)
+        return _linear_layer(self.eigenspace_, self.image_shape_, unit)
+
+
+def _linear_layer(space: Eigenspace, image_shape: tuple[int, int, int], unit_norm: bool) -> EigenProjection:
+    """The frozen layer of a fitted linear eigenspace (``Eigenspace.to_module`` has no ``unit_norm``)."""
+    return EigenProjection(
+        space.mean_, space.components_, space.eigenvalues_, image_shape, unit_norm=unit_norm
+    )

@@ -1,0 +1,204 @@
+"""What :class:`~torch_eigview.method.estimator.FewViewEigenspace` takes in, validated.
+
+Seed views, their angles and labels for ``fit``; blocks of gallery views for
+``fit_blocks``; and the hyperparameters, checked by ``fit`` (scikit-learn's convention).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import numbers
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+
+import torch
+from torch.utils.data import DataLoader, RandomSampler
+
+from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
+from torch_eigview.synthesis import SynthesisOptions
+
+__all__ = [
+    "ALL_COMPONENTS",
+    "Params",
+    "block_item",
+    "block_source",
+    "check_angles",
+    "check_labels",
+    "check_seeds",
+    "check_synth",
+    "resolve_components",
+    "seed_steps",
+    "wrap_degrees",
+]
+
+ALL_COMPONENTS = math.nextafter(1.0, 0.0)
+"""The energy fraction ``n_components=None`` stands for: every component above rounding.
+
+The eigenspaces keep the smallest k whose eigenvalues reach the fraction, at most the
+rank; no partial sum of the kept eigenvalues reaches the largest float below 1 before the
+last eigenvalue above rounding level is in."""
+
+
+def resolve_components(n_components: object) -> int | float:
+    """``n_components`` validated: an int >= 1, a fraction in (0, 1), or None for :data:`ALL_COMPONENTS`."""
+    return ALL_COMPONENTS if n_components is None else check_n_components(n_components)
+
+
+def wrap_degrees(angles: torch.Tensor) -> torch.Tensor:
+    """Angles wrapped to (-180, 180], as the experiments store gallery poses."""
+    return 180 - torch.remainder(180 - angles, 360)
+
+
+@dataclass(frozen=True)
+class Params:
+    """The hyperparameters of :class:`FewViewEigenspace`, validated."""
+
+    n_components: int | float
+    synth: tuple[float, float, float] | None
+    options: SynthesisOptions
+    unit_norm: bool
+    kernel: str | None
+    gamma: float | str | None
+    synth_follows_seeds: bool
+    max_views: int
+
+    def thetas(self, steps: list[float]) -> list[float]:
+        """Gallery angles relative to the first seed, for seeds ``steps`` apart (as
+        ``CoilExperiment.synth_angles``: each seed past the second extends the range on
+        its side by its step, when ``synth_follows_seeds``)."""
+        assert self.synth is not None
+        start, stop, step = self.synth
+        if self.synth_follows_seeds:
+            extra = (len(steps) - 1) * steps[0] if len(set(steps)) == 1 else sum(steps[1:])
+            start, stop = start + min(extra, 0.0), stop + max(extra, 0.0)
+        n = int((stop - start) / step + 1e-9) + 1
+        return [start + i * step for i in range(n)]
+
+
+def check_synth(synth: object) -> tuple[float, float, float] | None:
+    if synth is None:
+        return None
+    if not isinstance(synth, Sequence) or isinstance(synth, str) or len(synth) != 3:
+        raise ValueError(f"synth must be (start, stop, step) in degrees, got {synth!r}")
+    start, stop, step = (check_number(v, f"synth[{i}]") for i, v in enumerate(synth))
+    if not all(math.isfinite(v) for v in (start, stop, step)):
+        raise ValueError(f"synth must hold finite angles, got {synth!r}")
+    if not step > 0:
+        raise ValueError(f"synth step must be positive, got {step}")
+    if stop < start:
+        raise ValueError(f"synth must have start <= stop, got start={start}, stop={stop}")
+    return start, stop, step
+
+
+def check_seeds(seeds: object) -> list[torch.Tensor]:
+    """One (V_o, C, H, W) tensor per object, of one view shape and dtype."""
+    if isinstance(seeds, torch.Tensor):
+        check_float_tensor(seeds, "seeds")
+        check_ndim(seeds, "seeds", (5,), "(O, V, C, H, W)")
+        objects = list(seeds.detach().unbind(0))
+    elif isinstance(seeds, Sequence) and not isinstance(seeds, str):
+        objects = []
+        for i, s in enumerate(seeds):
+            check_float_tensor(s, f"seeds[{i}]")
+            check_ndim(s, f"seeds[{i}]", (4,), "(V, C, H, W)")
+            objects.append(s.detach())
+    else:
+        raise TypeError(
+            f"seeds must be an (O, V, C, H, W) tensor or a sequence of (V, C, H, W) tensors, got {type(seeds).__name__}"
+        )
+    if not objects:
+        raise ValueError("seeds must hold at least one object, got none")
+    first = objects[0]
+    for i, s in enumerate(objects):
+        if s.shape[1:] != first.shape[1:] or s.dtype != first.dtype or s.shape[0] < 1:
+            raise ValueError(
+                f"seeds[{i}] must hold V >= 1 views of shape {tuple(first.shape[1:])} and dtype {first.dtype} "
+                f"like seeds[0], got shape {tuple(s.shape)} and dtype {s.dtype}"
+            )
+    return objects
+
+
+def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[float]]:
+    """Per object its seed views' angles (degrees): one shared list, or one list per object."""
+    if isinstance(seed_angles, torch.Tensor):
+        seed_angles = seed_angles.detach().tolist()
+    if not isinstance(seed_angles, Sequence) or isinstance(seed_angles, str) or not seed_angles:
+        raise TypeError(f"seed_angles must be a non-empty sequence of angles in degrees, got {seed_angles!r}")
+    shared = isinstance(seed_angles[0], numbers.Real)
+    per_object = [seed_angles] * len(objects) if shared else list(seed_angles)
+    if len(per_object) != len(objects):
+        raise ValueError(
+            f"seed_angles must hold one list of angles per object ({len(objects)}), got {len(per_object)}"
+        )
+    out = []
+    for i, (angles, views) in enumerate(zip(per_object, objects, strict=True)):
+        what = "seed_angles" if shared else f"seed_angles[{i}]"
+        if not isinstance(angles, Sequence) or len(angles) != views.shape[0]:
+            raise ValueError(
+                f"{what} must hold one angle per seed view of object {i} ({views.shape[0]}), got {angles!r}"
+            )
+        values = [check_number(a, what) for a in angles]
+        if not all(math.isfinite(a) for a in values):
+            raise ValueError(f"{what} must hold finite angles, got {angles!r}")
+        out.append(values)
+    return out
+
+
+def check_labels(labels: object, n_objects: int) -> list[int]:
+    if labels is None:
+        return list(range(n_objects))
+    if isinstance(labels, torch.Tensor):
+        labels = labels.detach().tolist()
+    if not isinstance(labels, Sequence) or isinstance(labels, str) or len(labels) != n_objects:
+        raise ValueError(f"labels must hold one int per object ({n_objects}), got {labels!r}")
+    return [check_int(v, f"labels[{i}]") for i, v in enumerate(labels)]
+
+
+def seed_steps(angles: list[float]) -> list[float]:
+    return [b - a for a, b in itertools.pairwise(angles)]
+
+
+def block_source(blocks: object) -> Callable[[], Iterable[object]]:
+    """A callable giving a fresh pass over ``blocks`` (see ``FewViewEigenspace.fit_blocks``)."""
+    if isinstance(blocks, DataLoader) and isinstance(blocks.sampler, RandomSampler):
+        raise ValueError(
+            "blocks is a DataLoader that shuffles: every pass must yield the same views in the same order "
+            "(shuffle=False)"
+        )
+    if isinstance(blocks, torch.Tensor):
+        raise TypeError("blocks must be an iterable of view blocks, got one tensor (wrap it in a list)")
+    if callable(blocks) and not isinstance(blocks, Iterable):
+        return blocks
+    if not isinstance(blocks, Iterable):
+        raise TypeError(
+            f"blocks must be an iterable of view blocks or a callable returning one, got {type(blocks).__name__}"
+        )
+    if iter(blocks) is blocks:  # one pass only: hold it
+        items = list(blocks)
+        return lambda: items
+    return lambda: blocks
+
+
+def block_item(item: object, index: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(B, C, H, W) views, (B,) int64 labels and (B,) float64 poses of one block."""
+    what = f"blocks[{index}]"
+    parts = list(item) if isinstance(item, (tuple, list)) else [item]
+    if not 1 <= len(parts) <= 3:
+        raise ValueError(
+            f"{what} must be views, (views, labels) or (views, labels, poses), got {len(parts)} parts"
+        )
+    views = check_float_tensor(parts[0], f"{what} views")
+    check_ndim(views, f"{what} views", (4,), "(B, C, H, W)")
+    n = views.shape[0]
+    labels = torch.as_tensor(parts[1]) if len(parts) > 1 else torch.full((n,), index)
+    poses = (
+        torch.as_tensor(parts[2], dtype=torch.float64)
+        if len(parts) > 2
+        else torch.zeros(n, dtype=torch.float64)
+    )
+    if labels.is_floating_point() or labels.is_complex() or tuple(labels.shape) != (n,):
+        raise ValueError(f"{what} labels must be ({n},) integers, got {labels.dtype} {tuple(labels.shape)}")
+    if tuple(poses.shape) != (n,):
+        raise ValueError(f"{what} poses must have shape ({n},), got {tuple(poses.shape)}")
+    return views.detach(), labels.to(views.device, torch.int64), poses.to(views.device)

@@ -1,0 +1,387 @@
+"""scikit-learn estimators around the eigenspaces and the whole method: NumPy in, NumPy out.
+
+- :class:`EigenspacePCA`: :class:`~torch_eigview.decomposition.eigenspace.Eigenspace` as a
+  transformer (``sklearn.decomposition.PCA``'s attributes);
+- :class:`EigenspaceKernelPCA`: :class:`~torch_eigview.decomposition.kernel.KernelEigenspace`
+  as a transformer (``sklearn.decomposition.KernelPCA``'s);
+- :class:`FewViewRecognizerClassifier`: :class:`~torch_eigview.method.FewViewEigenspace`, the
+  paper's method, as a classifier of flattened images.
+
+Each stores its parameters as given (``get_params``/``set_params``, ``clone``), validates
+them in ``fit``, keeps what it learned in attributes ending in ``_`` (``check_is_fitted``),
+takes float32 or float64 arrays (other numbers become float64) and works in a ``Pipeline``
+and ``GridSearchCV``. scikit-learn is an optional extra, never imported by the rest of the
+package: ``pip install 'torch_eigview[sklearn]'``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+try:
+    from sklearn.base import BaseEstimator, ClassifierMixin, ClassNamePrefixFeaturesOutMixin, TransformerMixin
+    from sklearn.utils.multiclass import check_classification_targets
+    from sklearn.utils.validation import check_array, check_is_fitted, validate_data
+except ImportError as err:  # pragma: no cover - the extra is installed where the tests run
+    raise ImportError(
+        "torch_eigview.sklearn needs scikit-learn >= 1.6: pip install 'torch_eigview[sklearn]'"
+    ) from err
+
+from torch_eigview.check import check_image_shape, check_number
+from torch_eigview.decomposition.eigenspace import Eigenspace
+from torch_eigview.decomposition.kernel import KernelEigenspace
+from torch_eigview.method import FewViewEigenspace, resolve_components
+from torch_eigview.nn.functional import unit_rows
+from torch_eigview.nn.kernel_projection import KernelProjection
+from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.synthesis import SynthesisOptions
+
+__all__ = ["EigenspaceKernelPCA", "EigenspacePCA", "FewViewRecognizerClassifier"]
+
+_FLOATS = [np.float64, np.float32]  # kept as they are; any other dtype becomes the first
+
+
+def _tensor(x: np.ndarray) -> torch.Tensor:
+    """A validated array as a tensor on its memory (a copy when read-only: torch writes nowhere,
+    but ``from_numpy`` wants a writable array)."""
+    x = np.ascontiguousarray(x)
+    return torch.from_numpy(x if x.flags.writeable else x.copy())
+
+
+def _numpy(t: torch.Tensor) -> np.ndarray:
+    return t.detach().cpu().numpy()
+
+
+def _check_bool(value: object, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise TypeError(f"{name} must be a bool, got {value!r}")
+    return value
+
+
+class _EigenspaceTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstimator):
+    """What the two eigenspace transformers share: fit, transform, tags, the layer."""
+
+    n_components: int | float | None
+    unit_norm: bool
+    image_shape: tuple[int, int, int] | None
+    eigenspace_: Eigenspace | KernelEigenspace
+
+    def _make_space(self) -> Eigenspace | KernelEigenspace:
+        raise NotImplementedError
+
+    def _learned(self) -> None:
+        """Copies the fitted tensors out of ``eigenspace_`` as NumPy attributes."""
+
+    def _rows(self, x: torch.Tensor) -> torch.Tensor:
+        return unit_rows(x) if self.unit_norm else x
+
+    def fit(self, X: Any, y: Any = None) -> Any:
+        """Fits on the (n_samples, n_features) rows of ``X``, n_samples >= 2; ``y`` is ignored.
+
+        Returns:
+            self, fitted.
+        """
+        X = validate_data(self, X, dtype=_FLOATS, ensure_min_samples=2)
+        _check_bool(self.unit_norm, "unit_norm")
+        self.image_shape_ = check_image_shape(self.image_shape, X.shape[1], "image_shape")
+        space = self._make_space()
+        x = self._rows(_tensor(X))
+        with torch.no_grad():
+            space.fit(x if self.image_shape_ is None else x.reshape(-1, *self.image_shape_))
+        self.eigenspace_ = space
+        self.n_components_ = space.n_components_
+        self._learned()
+        return self
+
+    def transform(self, X: Any) -> np.ndarray:
+        """(n_samples, n_features) rows → (n_samples, n_components_) coordinates, the fitted dtype."""
+        check_is_fitted(self)
+        X = validate_data(self, X, dtype=_FLOATS, reset=False)
+        x = _tensor(X).to(self._dtype)
+        with torch.no_grad():
+            return _numpy(self.eigenspace_.transform(self._rows(x)))
+
+    @property
+    def _dtype(self) -> torch.dtype:
+        space = self.eigenspace_
+        return space.mean_.dtype if isinstance(space, Eigenspace) else space.X_fit_.dtype
+
+    @property
+    def _n_features_out(self) -> int:
+        """The number of output features, for ``get_feature_names_out``."""
+        return int(self.n_components_)
+
+    def __sklearn_tags__(self) -> Any:
+        tags = super().__sklearn_tags__()
+        tags.transformer_tags.preserves_dtype = ["float64", "float32"]
+        return tags
+
+
+class EigenspacePCA(_EigenspaceTransformer):
+    """PCA by :class:`~torch_eigview.decomposition.eigenspace.Eigenspace`, as a scikit-learn transformer.
+
+    Args:
+        n_components: k (int >= 1), an energy fraction in (0, 1), or None: every component
+            above the rank tolerance (the rank of the centred data).
+        solver: ``Eigenspace``'s solver, "auto", "gram", "covariance" or "svd".
+        unit_norm: scale each row to unit L2 norm before fitting and transforming
+            (Murase and Nayar's brightness normalization).
+        image_shape: (C, H, W) of the images the rows flatten (row-major), for
+            :meth:`to_module`; None for other data.
+
+    Attributes:
+        mean_: (n_features,) the mean row.
+        components_: (n_components_, n_features) orthonormal eigenvectors.
+        eigenvalues_: (n_components_,) eigenvalues of the centred scatter matrix.
+        explained_variance_: (n_components_,) ``eigenvalues_ / (n_samples - 1)``.
+        explained_variance_ratio_: (n_components_,) fractions of the total variance.
+        n_components_: k.
+        eigenspace_: the fitted ``Eigenspace`` (torch tensors).
+
+    Example:
+        >>> X = np.random.default_rng(0).normal(size=(20, 6))
+        >>> EigenspacePCA(3).fit_transform(X).shape
+        (20, 3)
+    """
+
+    def __init__(
+        self,
+        n_components: int | float | None = None,
+        *,
+        solver: str = "auto",
+        unit_norm: bool = False,
+        image_shape: tuple[int, int, int] | None = None,
+    ) -> None:
+        self.n_components = n_components
+        self.solver = solver
+        self.unit_norm = unit_norm
+        self.image_shape = image_shape
+
+    def _make_space(self) -> Eigenspace:
+        return Eigenspace(resolve_components(self.n_components), solver=self.solver)
+
+    def _learned(self) -> None:
+        space = self.eigenspace_
+        assert isinstance(space, Eigenspace)
+        self.mean_ = _numpy(space.mean_)
+        self.components_ = _numpy(space.components_)
+        self.eigenvalues_ = _numpy(space.eigenvalues_)
+        self.explained_variance_ = _numpy(space.explained_variance_)
+        self.explained_variance_ratio_ = _numpy(space.explained_variance_ratio_)
+
+    def inverse_transform(self, X: Any) -> np.ndarray:
+        """(n_samples, n_components_) coordinates → (n_samples, n_features) rows (unit-norm ones
+        with ``unit_norm``)."""
+        check_is_fitted(self)
+        z = check_array(X, dtype=_FLOATS)
+        if z.shape[1] != self.n_components_:
+            raise ValueError(f"X must have shape (n_samples, {self.n_components_}), got shape {z.shape}")
+        assert isinstance(self.eigenspace_, Eigenspace)
+        return _numpy(self.eigenspace_.inverse_transform(_tensor(z).to(self._dtype)))
+
+    def to_module(self) -> EigenProjection:
+        """The frozen layer (``unit_norm`` and ``image_shape`` as set)."""
+        check_is_fitted(self)
+        s = self.eigenspace_
+        assert isinstance(s, Eigenspace)
+        return EigenProjection(
+            s.mean_, s.components_, s.eigenvalues_, self.image_shape_, unit_norm=self.unit_norm
+        )
+
+
+class EigenspaceKernelPCA(_EigenspaceTransformer):
+    """Kernel PCA by :class:`~torch_eigview.decomposition.kernel.KernelEigenspace`, as a scikit-learn transformer.
+
+    Args:
+        n_components: k (int >= 1), an energy fraction in (0, 1), or None: every component
+            with a positive eigenvalue above rounding.
+        kernel: "rbf", "poly", "cosine" or "linear".
+        gamma: γ of rbf and poly (> 0), "median" (rbf), or None: 1 / n_features.
+        degree, coef0: of poly.
+        nystrom: None (exact), or the number of Nyström landmark rows.
+        unit_norm: scale each row to unit L2 norm before fitting and transforming.
+        image_shape: (C, H, W) of the images the rows flatten, for :meth:`to_module`.
+
+    Attributes:
+        eigenvalues_: (n_components_,) eigenvalues of the centred kernel matrix.
+        gamma_: the γ used.
+        n_components_: k.
+        eigenspace_: the fitted ``KernelEigenspace`` (torch tensors).
+
+    Example:
+        >>> X = np.random.default_rng(0).normal(size=(20, 6))
+        >>> EigenspaceKernelPCA(3, gamma=0.1).fit_transform(X).shape
+        (20, 3)
+    """
+
+    def __init__(
+        self,
+        n_components: int | float | None = None,
+        *,
+        kernel: str = "rbf",
+        gamma: float | str | None = None,
+        degree: int = 3,
+        coef0: float = 1.0,
+        nystrom: int | None = None,
+        unit_norm: bool = False,
+        image_shape: tuple[int, int, int] | None = None,
+    ) -> None:
+        self.n_components = n_components
+        self.kernel = kernel
+        self.gamma = gamma
+        self.degree = degree
+        self.coef0 = coef0
+        self.nystrom = nystrom
+        self.unit_norm = unit_norm
+        self.image_shape = image_shape
+
+    def _make_space(self) -> KernelEigenspace:
+        return KernelEigenspace(
+            resolve_components(self.n_components),
+            kernel=self.kernel,
+            gamma=self.gamma,
+            degree=self.degree,
+            coef0=self.coef0,
+            nystrom=self.nystrom,
+        )
+
+    def _learned(self) -> None:
+        space = self.eigenspace_
+        assert isinstance(space, KernelEigenspace)
+        self.eigenvalues_ = _numpy(space.eigenvalues_)
+        self.gamma_ = space.gamma_
+
+    def to_module(self) -> KernelProjection:
+        """The frozen layer (``unit_norm`` and ``image_shape`` as set)."""
+        check_is_fitted(self)
+        space = self.eigenspace_
+        assert isinstance(space, KernelEigenspace)
+        return space.to_module(unit_norm=self.unit_norm)
+
+
+class FewViewRecognizerClassifier(ClassifierMixin, BaseEstimator):
+    """The paper's method (:class:`~torch_eigview.method.FewViewEigenspace`) as a classifier.
+
+    ``fit(X, y)`` takes the seed views: each row of ``X`` is one image flattened row-major
+    from ``image_shape`` (C, H, W), ``y`` its object's label. The rows of one label are that
+    object's seed views, in order of appearance, at the angles ``angles`` (a fit parameter:
+    one angle in degrees per row; ``GridSearchCV`` and ``Pipeline`` pass it on, e.g.
+    ``pipe.fit(X, y, clf__angles=a)``) or, without it, at 0, α, 2α, … (``alpha``). Each
+    object's views over ``synth`` are synthesized from its seeds, one eigenspace is fitted
+    over all of them, and ``predict`` gives a row the label of its nearest gallery view
+    (``predict_pose``: that view's pose).
+
+    With ``synth=None`` nothing is synthesized: the gallery is the rows themselves, any
+    number per label (the experiments' ``sparse`` baseline; images or any other
+    features, ``image_shape`` optional).
+
+    Args:
+        n_components: k (int >= 1), an energy fraction in (0, 1), or None: every component.
+        image_shape: (C, H, W) of the images (needed with ``synth``).
+        alpha: angle in degrees between consecutive seed views of a label, without ``angles``.
+        synth, options, unit_norm, kernel, gamma, synth_follows_seeds: as ``FewViewEigenspace``'s.
+
+    Attributes:
+        classes_: the labels, sorted.
+        model_: the fitted ``FewViewEigenspace`` (its gallery labels index ``classes_``).
+        recognizer_: its ``NearestNeighborRecognizer``.
+
+    Example:
+        >>> X = np.random.default_rng(0).random((6, 64))
+        >>> clf = FewViewRecognizerClassifier(synth=None).fit(X, [0, 0, 1, 1, 2, 2])
+        >>> clf.predict(X).tolist()
+        [0, 0, 1, 1, 2, 2]
+    """
+
+    def __init__(
+        self,
+        n_components: int | float | None = None,
+        *,
+        image_shape: tuple[int, int, int] | None = None,
+        alpha: float = 10.0,
+        synth: tuple[float, float, float] | None = (-20.0, 20.0, 1.0),
+        options: SynthesisOptions | None = None,
+        unit_norm: bool = True,
+        kernel: str | None = None,
+        gamma: float | str | None = None,
+        synth_follows_seeds: bool = True,
+    ) -> None:
+        self.n_components = n_components
+        self.image_shape = image_shape
+        self.alpha = alpha
+        self.synth = synth
+        self.options = options
+        self.unit_norm = unit_norm
+        self.kernel = kernel
+        self.gamma = gamma
+        self.synth_follows_seeds = synth_follows_seeds
+
+    def fit(self, X: Any, y: Any, angles: Any = None) -> FewViewRecognizerClassifier:
+        """Fits on seed views ``X`` (n_samples, C*H*W) of the objects ``y`` (n_samples,).
+
+        Args:
+            X: the seed views, flattened; n_samples >= 2.
+            y: their labels.
+            angles: (n_samples,) their angles in degrees, or None: 0, α, 2α, … per label.
+
+        Returns:
+            self, fitted.
+        """
+        X, y = validate_data(self, X, y, dtype=_FLOATS, ensure_min_samples=2)
+        check_classification_targets(y)
+        self.classes_, index = np.unique(y, return_inverse=True)
+        n_features = X.shape[1]
+        if self.synth is not None and self.image_shape is None:
+            raise ValueError("image_shape=(C, H, W) is needed to synthesize views (synth is not None)")
+        if self.unit_norm is True and n_features == 1:
+            raise ValueError(
+                "unit_norm=True needs 2 features or more: one value scales to ±1, got n_features = 1"
+            )
+        shape = check_image_shape(self.image_shape, n_features, "image_shape") or (1, 1, n_features)
+        poses = self._angles(angles, index)
+        views = _tensor(X).reshape(-1, *shape)
+        rows = [np.flatnonzero(index == c) for c in range(len(self.classes_))]
+        # Every parameter but the two that say how rows become seed views is FewViewEigenspace's.
+        params = {k: v for k, v in self.get_params().items() if k not in ("image_shape", "alpha")}
+        model = FewViewEigenspace(**params)
+        seeds = [views[torch.from_numpy(r)] for r in rows]
+        self.model_ = model.fit(seeds, [poses[r].tolist() for r in rows], list(range(len(rows))))
+        self.recognizer_ = model.recognizer_
+        return self
+
+    def _angles(self, angles: Any, index: np.ndarray) -> np.ndarray:
+        """(n_samples,) float64 angle of each row: ``angles``, or its rank within its label times α."""
+        if angles is None:
+            alpha = check_number(self.alpha, "alpha")
+            rank = np.zeros(index.shape[0], dtype=np.int64)
+            for c in np.unique(index):
+                rank[index == c] = np.arange(int((index == c).sum()))
+            return rank * alpha
+        out = check_array(angles, ensure_2d=False, dtype=np.float64)
+        if out.shape != index.shape:
+            raise ValueError(
+                f"angles must have shape ({index.shape[0]},), one per row of X, got shape {out.shape}"
+            )
+        return out
+
+    def _recognize(self, X: Any) -> Any:
+        check_is_fitted(self)
+        X = validate_data(self, X, dtype=_FLOATS, reset=False)
+        return self.model_.predict(_tensor(X).to(self.recognizer_.codes.dtype))
+
+    def predict(self, X: Any) -> np.ndarray:
+        """(n_samples,) the label (of ``classes_``) of each row's nearest gallery view."""
+        labels = _numpy(self._recognize(X).labels)
+        return self.classes_[labels]
+
+    def predict_pose(self, X: Any) -> np.ndarray:
+        """(n_samples,) the pose in degrees of each row's nearest gallery view."""
+        return _numpy(self._recognize(X).poses)
+
+    def to_module(self) -> EigenProjection | KernelProjection:
+        """The frozen layer that projects (B, C, H, W) views into the eigenspace."""
+        check_is_fitted(self)
+        return self.model_.to_module()
