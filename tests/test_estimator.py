@@ -8,8 +8,8 @@ import torch
 from torch.utils.data import DataLoader, TensorDataset
 
 from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.datasets.renderer import OrthographicCamera, make_object, render_views
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.errors import NotFittedError

@@ -21,7 +21,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.utils.estimator_checks import parametrize_with_checks
 from sklearn.utils.validation import check_is_fitted
 
-from torch_eigview.datasets.renderer import OrthographicCamera, make_object, render_views
+from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 from torch_eigview.method import FewViewEigenspace
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.sklearn import (

@@ -25,6 +25,7 @@ import torch
 
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
+from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
@@ -41,34 +42,6 @@ __all__ = [
 ]
 
 K = TypeVar("K", bound=Hashable)
-
-
-def wrap_degrees(angles: torch.Tensor) -> torch.Tensor:
-    """Wraps angles to (-180, 180].
-
-    Example:
-        >>> wrap_degrees(torch.tensor([190.0, -180.0, 365.0])).tolist()
-        [-170.0, 180.0, 5.0]
-    """
-    return 180 - torch.remainder(180 - angles, 360)
-
-
-def angle_range(start: float, stop: float, step: float, name: str) -> list[float]:
-    """``start, start + step, …, stop`` (inclusive), validated.
-
-    Raises:
-        ValueError: ``step`` is not positive, or ``stop < start``; the message names ``name``.
-
-    Example:
-        >>> angle_range(-10.0, 10.0, 5.0, "test")
-        [-10.0, -5.0, 0.0, 5.0, 10.0]
-    """
-    if not step > 0:
-        raise ValueError(f"{name} step must be positive, got {step}")
-    if stop < start:
-        raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
-    n = int((stop - start) / step + 1e-9) + 1
-    return [start + i * step for i in range(n)]
 
 
 def stack_gallery(

@@ -215,7 +215,20 @@ class FittedEigenspace(FittedEstimator[EigenFit]):
             raise TypeError(f"Z must have the fitted dtype {fit.dtype}, got {z.dtype}")
         return z @ fit.components + fit.mean
 
-    def to_module(self) -> EigenProjection:
-        """Returns the frozen ``EigenProjection`` (copies of mean, components, eigenvalues)."""
+    def to_module(
+        self, unit_norm: bool = False, image_shape: tuple[int, int, int] | None = None
+    ) -> EigenProjection:
+        """Returns the frozen ``EigenProjection`` (copies of mean, components, eigenvalues).
+
+        Args:
+            unit_norm: the module divides each input view by its L2 norm first (fit on
+                unit-norm views then), as :meth:`KernelEigenspace.to_module`.
+            image_shape: ``(C, H, W)`` of the views, for a fit on flattened (P, N) views;
+                default the fitted one.
+
+        Raises:
+            NotFittedError: before ``fit``.
+        """
         fit = self._fitted("to_module")
-        return EigenProjection(fit.mean, fit.components, fit.eigenvalues, fit.image_shape)
+        shape = fit.image_shape if image_shape is None else image_shape
+        return EigenProjection(fit.mean, fit.components, fit.eigenvalues, shape, unit_norm=unit_norm)

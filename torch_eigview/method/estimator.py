@@ -193,7 +193,7 @@ class FewViewEigenspace:
         space: Eigenspace | KernelEigenspace
         if params.kernel is None:
             space = linear = Eigenspace(params.n_components).fit(x_fit)
-            projection = _linear_layer(linear, (c, h, w), params.unit_norm)
+            projection = linear.to_module(unit_norm=params.unit_norm, image_shape=(c, h, w))
         else:
             kspace = KernelEigenspace(params.n_components, kernel=params.kernel, gamma=params.gamma)
             space = kspace.fit(x_fit.reshape(-1, c, h, w))
@@ -203,7 +203,7 @@ class FewViewEigenspace:
 
     def _set_fitted(
         self,
-        space: Eigenspace | KernelEigenspace,
+        space: Eigenspace | KernelEigenspace | StreamingEigenspace,
         projection: EigenProjection | KernelProjection,
         recognizer: NearestNeighborRecognizer,
         image_shape: tuple[int, int, int],
@@ -256,7 +256,7 @@ class FewViewEigenspace:
             space = StreamingEigenspace(params.n_components, max_views=params.max_views).fit(prepared)
             assert space.image_shape_ is not None  # the blocks are (B, C, H, W)
             image_shape = space.image_shape_
-            projection = _linear_layer(space, image_shape, params.unit_norm)
+            projection = space.to_module(unit_norm=params.unit_norm, image_shape=image_shape)
             codes, labels, poses = [], [], []
             for i, item in enumerate(source()):
                 views, block_labels, block_poses = block_item(item, i)
@@ -295,11 +295,4 @@ class FewViewEigenspace:
         unit = self.projection_.unit_norm if unit_norm is None else unit_norm
         if isinstance(self.eigenspace_, KernelEigenspace):
             return self.eigenspace_.to_module(unit_norm=unit)
-        return _linear_layer(self.eigenspace_, self.image_shape_, unit)
-
-
-def _linear_layer(space: Eigenspace, image_shape: tuple[int, int, int], unit_norm: bool) -> EigenProjection:
-    """The frozen layer of a fitted linear eigenspace (``Eigenspace.to_module`` has no ``unit_norm``)."""
-    return EigenProjection(
-        space.mean_, space.components_, space.eigenvalues_, image_shape, unit_norm=unit_norm
-    )
+        return self.eigenspace_.to_module(unit_norm=unit, image_shape=self.image_shape_)

@@ -16,6 +16,7 @@ import torch
 from torch.utils.data import DataLoader, RandomSampler
 
 from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
+from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
 
 __all__ = [
@@ -45,11 +46,6 @@ def resolve_components(n_components: object) -> int | float:
     return ALL_COMPONENTS if n_components is None else check_n_components(n_components)
 
 
-def wrap_degrees(angles: torch.Tensor) -> torch.Tensor:
-    """Angles wrapped to (-180, 180], as the experiments store gallery poses."""
-    return 180 - torch.remainder(180 - angles, 360)
-
-
 @dataclass(frozen=True)
 class Params:
     """The hyperparameters of :class:`FewViewEigenspace`, validated."""
@@ -72,8 +68,7 @@ class Params:
         if self.synth_follows_seeds:
             extra = (len(steps) - 1) * steps[0] if len(set(steps)) == 1 else sum(steps[1:])
             start, stop = start + min(extra, 0.0), stop + max(extra, 0.0)
-        n = int((stop - start) / step + 1e-9) + 1
-        return [start + i * step for i in range(n)]
+        return angle_range(start, stop, step, "synth")
 
 
 def check_synth(synth: object) -> tuple[float, float, float] | None:

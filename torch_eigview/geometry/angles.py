@@ -1,0 +1,35 @@
+"""Angles in degrees: ranges of gallery and test poses, and wrapping to (−180, 180]."""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["angle_range", "wrap_degrees"]
+
+
+def wrap_degrees(angles: torch.Tensor) -> torch.Tensor:
+    """Wraps angles to (-180, 180].
+
+    Example:
+        >>> wrap_degrees(torch.tensor([190.0, -180.0, 365.0])).tolist()
+        [-170.0, 180.0, 5.0]
+    """
+    return 180 - torch.remainder(180 - angles, 360)
+
+
+def angle_range(start: float, stop: float, step: float, name: str) -> list[float]:
+    """``start, start + step, …, stop`` (inclusive), validated.
+
+    Raises:
+        ValueError: ``step`` is not positive, or ``stop < start``; the message names ``name``.
+
+    Example:
+        >>> angle_range(-10.0, 10.0, 5.0, "test")
+        [-10.0, -5.0, 0.0, 5.0, 10.0]
+    """
+    if not step > 0:
+        raise ValueError(f"{name} step must be positive, got {step}")
+    if stop < start:
+        raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
+    n = int((stop - start) / step + 1e-9) + 1
+    return [start + i * step for i in range(n)]
