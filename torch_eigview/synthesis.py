@@ -34,8 +34,9 @@ import torch
 from torch_eigview.check import as_angle_tensor, check_alpha, check_finite, check_float_tensor, check_ndim
 from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
+from torch_eigview.warp.base import BLENDS
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent
-from torch_eigview.warp.novel_view import BLENDS, NovelViewWarp
+from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
     "PairGeometry",

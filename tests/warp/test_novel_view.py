@@ -11,7 +11,8 @@ import torch
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.pose import estimate_elevation, orthographic_coefficients
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
-from torch_eigview.warp.novel_view import NovelViewWarp, WarpMaps, _sampler
+from torch_eigview.warp.maps import WarpMaps, _sampler
+from torch_eigview.warp.novel_view import NovelViewWarp
 
 from tests.helpers import check_module, rand
 

@@ -10,7 +10,8 @@ import torch
 
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.geometry.correspondence import correspondence_from_disparity
-from torch_eigview.warp.novel_view import NovelViewWarp, WarpMaps
+from torch_eigview.warp.maps import WarpMaps
+from torch_eigview.warp.novel_view import NovelViewWarp
 from torch_eigview.warp.operator import SparseViewOperator
 
 # G·C and kornia round differently (kornia goes pixel → normalized → pixel coordinates).

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import torch
 
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim
-from torch_eigview.warp.novel_view import WarpMaps, _renormalize
+from torch_eigview.warp.maps import WarpMaps, _renormalize
 
 __all__ = ["SparseViewOperator"]
 
