@@ -167,7 +167,11 @@ class RowGeometry:
         return _refine_2d(src_x, dst_x_for_src - grid[:, None], dy, valid)
 
     def maps(
-        self, correspondence: Correspondence, thetas: torch.Tensor, share_of_second: torch.Tensor, n_sources: int
+        self,
+        correspondence: Correspondence,
+        thetas: torch.Tensor,
+        share_of_second: torch.Tensor,
+        n_sources: int,
     ) -> WarpMaps:
         """Both seed views' maps (or view 1's alone) and their blend weights.
 
