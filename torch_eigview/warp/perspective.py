@@ -29,7 +29,8 @@ from kornia.geometry.epipolar import triangulate_points
 from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.pose import rotation_y
-from torch_eigview.geometry.trifocal import novel_view_tensor_from_cameras, transfer_points
+from torch_eigview.geometry.transfer import transfer_points
+from torch_eigview.geometry.trifocal import novel_view_tensor_from_cameras
 from torch_eigview.warp.base import ViewWarp
 from torch_eigview.warp.maps import WarpMaps
 from torch_eigview.warp.raster import invert_map_2d
@@ -116,7 +117,7 @@ class PerspectiveWarp(ViewWarp):
         max_stretch: a forward-mapped triangle edge longer than this (pixels) is a depth
             jump, not a surface.
         line: the line through the match in the other seed view used for the transfer
-            (:func:`~torch_eigview.geometry.trifocal.transfer_points`).
+            (:func:`~torch_eigview.geometry.transfer.transfer_points`).
         grow: pixels by which each seed's map is continued beyond what it hits, for the
             target pixels that neither seed hits (the silhouette's last half pixel,
             whose source lies between a foreground and a background seed pixel).
