@@ -94,7 +94,7 @@ class NovelViewWarp(ViewWarp):
             raise ValueError(f"elevation={elevation} must be an angle in degrees in (-90, 90)")
         self.camera: torch.Tensor | None = None
         if camera is not None:
-            # Validates the camera now, at an angle where Eq. 2 is a real constraint.
+            # Validates the camera at construction, at an angle where Eq. 2 is a real constraint.
             affine_coefficients(camera, self.alpha, [self.alpha / 2, -self.alpha])
             if self.elevation != 0.0:
                 raise ValueError(
@@ -110,11 +110,13 @@ class NovelViewWarp(ViewWarp):
         )
 
     def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
-        """Target→source maps and blend weights for the novel angles ``thetas``.
+        """Eq. 2's target→source maps and blend weights for the novel angles ``thetas``.
 
         Args:
-            correspondence: (B, H, W) correspondences between the seed views.
-            thetas: (T,) novel angles in degrees from the first seed view, in (−90, 90).
+            correspondence: (B, H, W) correspondences between the seed views (the
+                horizontal disparities; a tilted camera's vertical motion follows from them).
+            thetas: (T,) novel angles in degrees from the first seed view, within a quarter
+                turn of it.
             n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
 
         Returns:
