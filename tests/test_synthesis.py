@@ -145,8 +145,10 @@ def test_pair_of(thetas: list[float], alpha: float, n_seeds: int, want: list[int
 
 
 def test_pair_of_errors() -> None:
-    with pytest.raises(ValueError, match="n_seeds must be an int >= 2, got 1"):
+    with pytest.raises(ValueError, match="n_seeds=1 must be >= 2"):
         pair_of([0.0], ALPHA, 1)
+    with pytest.raises(TypeError, match=r"n_seeds must be an integer, got float 2\.0"):
+        pair_of([0.0], ALPHA, 2.0)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"alpha=0\.0 must not be a multiple of 180"):
         pair_of([0.0], 0.0, 3)
 

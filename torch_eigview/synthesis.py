@@ -31,11 +31,19 @@ from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.check import as_angle_tensor, check_alpha, check_finite, check_float_tensor, check_ndim
+from torch_eigview.check import (
+    as_angle_tensor,
+    check_alpha,
+    check_finite,
+    check_float_tensor,
+    check_int,
+    check_ndim,
+)
 from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
+from torch_eigview.warp.base import BLENDS
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent
-from torch_eigview.warp.novel_view import BLENDS, NovelViewWarp
+from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
     "PairGeometry",
@@ -148,8 +156,7 @@ def pair_of(thetas: object, alpha: float | Sequence[float], n_seeds: int) -> tor
         >>> pair_of([-5.0, 9.0, 10.0, 25.0], [10.0, 20.0], 3).tolist()
         [0, 0, 1, 1]
     """
-    if isinstance(n_seeds, bool) or not isinstance(n_seeds, int) or n_seeds < 2:
-        raise ValueError(f"n_seeds must be an int >= 2, got {n_seeds!r}")
+    n_seeds = check_int(n_seeds, "n_seeds", minimum=2)
     return _pair_index(as_angle_tensor(thetas, "thetas", dtype=torch.float64), _steps(alpha, n_seeds))
 
 
@@ -205,6 +212,19 @@ def _steps(alpha: object, n_seeds: int) -> list[float]:
 
 
 def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
+    """Validates seed views and their angles.
+
+    Args:
+        seeds: (V, C, H, W) finite float seed views, V >= 2.
+        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
+
+    Returns:
+        ``(seeds, steps)``: the seeds and the V − 1 per-pair angles α_n.
+
+    Raises:
+        TypeError: ``seeds`` is not a float tensor.
+        ValueError: a bad shape, fewer than 2 views, non-finite values or bad angles.
+    """
     seeds = check_float_tensor(seeds, "seeds")
     check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
     if seeds.shape[0] < 2:

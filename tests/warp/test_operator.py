@@ -10,53 +10,19 @@ import torch
 
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.geometry.correspondence import correspondence_from_disparity
-from torch_eigview.warp.novel_view import NovelViewWarp, WarpMaps
+from torch_eigview.warp.maps import WarpMaps
+from torch_eigview.warp.novel_view import NovelViewWarp
 from torch_eigview.warp.operator import SparseViewOperator
 
-# G·C and kornia round differently (kornia goes pixel → normalized → pixel coordinates).
-TOL = {torch.float32: 1e-5, torch.float64: 1e-12}
-H, W = 12, 16
-ALPHA = 10.0
-# Extrapolation on both sides of [0, alpha], the seed angles themselves, and in between.
-THETAS = [-12.0, -4.0, 0.0, 3.5, 10.0, 16.0, 25.0]
-
-
-@pytest.fixture(params=[torch.float32, torch.float64], ids=["float32", "float64"])
-def dtype(request: pytest.FixtureRequest) -> torch.dtype:
-    return request.param
-
-
-def _generator(seed: int) -> torch.Generator:
-    return torch.Generator().manual_seed(seed)
-
-
-def _smooth_disparity(gen: torch.Generator, amplitude: float, dtype: torch.dtype) -> torch.Tensor:
-    """(H, W) smooth random disparity, zero at the left and right borders."""
-    y = torch.arange(H, dtype=torch.float64)[:, None]
-    x = torch.arange(W, dtype=torch.float64)[None, :]
-    phase, freq = torch.rand(2, generator=gen, dtype=torch.float64)
-    bump = torch.sin(math.pi * x / (W - 1)) * (1 + 0.5 * torch.cos(y * (0.2 + 0.5 * freq) + 6 * phase))
-    return (amplitude * bump).to(dtype)
-
-
-def _setup(
-    dtype: torch.dtype, channels: int, n_sources: int, amplitude: float = 2.5, seed: int = 0
-) -> tuple[torch.Tensor, WarpMaps]:
-    gen = _generator(seed)
-    images = torch.rand(n_sources, channels, H, W, generator=gen, dtype=torch.float64).to(dtype)
-    d12 = _smooth_disparity(gen, amplitude, dtype)
-    # An approximate reverse map: the consistency check then also marks pixels invalid,
-    # which exercises the warp's hole filling and one-view regions.
-    corr = correspondence_from_disparity(d12, -d12)
-    maps = NovelViewWarp(ALPHA).maps(corr, THETAS, n_sources=n_sources)
-    return images, maps
-
-
-def _assert_close(actual: torch.Tensor, expected: torch.Tensor, dtype: torch.dtype) -> None:
-    assert actual.dtype == expected.dtype == dtype
-    assert actual.shape == expected.shape
-    diff = float((actual - expected).abs().max())
-    assert diff <= TOL[dtype], f"max abs diff {diff:.3g} > {TOL[dtype]:.0e}"
+from tests.warp.operator_cases import (
+    THETAS,
+    H,
+    W,
+    assert_close,
+    generator,
+    maps_2d,
+    setup,
+)
 
 
 # --------------------------------------------------------------------------- gather mode
@@ -66,20 +32,20 @@ def _assert_close(actual: torch.Tensor, expected: torch.Tensor, dtype: torch.dty
 def test_from_maps_equals_kornia_warp(
     dtype: torch.dtype, channels: int, n_sources: int, amplitude: float
 ) -> None:
-    images, maps = _setup(dtype, channels, n_sources, amplitude)
+    images, maps = setup(dtype, channels, n_sources, amplitude)
     expected = NovelViewWarp.apply_maps(maps, images[:, None])[0]
     op = SparseViewOperator.from_maps(images, maps)
     assert op.n_views == len(THETAS) and op.image_shape == (channels, H, W)
     assert op.G.shape == (channels * H * W, n_sources * H * W * W)
     assert op.C.shape == (n_sources * H * W * W, len(THETAS))
     assert op.G.is_coalesced() and op.C.is_coalesced()
-    _assert_close(op.views(), expected, dtype)
-    _assert_close(op.data_matrix(), expected.reshape(len(THETAS), -1).T, dtype)
+    assert_close(op.views(), expected, dtype)
+    assert_close(op.data_matrix(), expected.reshape(len(THETAS), -1).T, dtype)
 
 
 def test_from_maps_source_columns_outside_image(dtype: torch.dtype) -> None:
     """Zeros padding, exact pixel centres and edges; NaN source columns of zero weight are skipped."""
-    gen = _generator(1)
+    gen = generator(1)
     s, t = 2, 4
     images = torch.rand(s, 3, H, W, generator=gen, dtype=torch.float64).to(dtype)
     src_x = torch.rand(s, 1, t, H, W, generator=gen, dtype=torch.float64) * (W + 5) - 3
@@ -91,21 +57,21 @@ def test_from_maps_source_columns_outside_image(dtype: torch.dtype) -> None:
     op = SparseViewOperator.from_maps(images, maps)
     # kornia turns a NaN coordinate into NaN (and NaN · 0 = NaN): give it any finite column there.
     finite = dataclasses.replace(maps, src_x=torch.nan_to_num(maps.src_x, nan=0.0))
-    _assert_close(op.views(), NovelViewWarp.apply_maps(finite, images[:, None])[0], dtype)
+    assert_close(op.views(), NovelViewWarp.apply_maps(finite, images[:, None])[0], dtype)
     assert op.views().isfinite().all()
 
 
 def test_from_maps_casts_maps_to_image_dtype() -> None:
-    images, maps = _setup(torch.float64, 3, 2)
+    images, maps = setup(torch.float64, 3, 2)
     images32 = images.float()
     op = SparseViewOperator.from_maps(images32, maps)
     assert op.G.dtype == op.C.dtype == torch.float32
-    _assert_close(op.views(), NovelViewWarp.apply_maps(maps, images32[:, None])[0], torch.float32)
+    assert_close(op.views(), NovelViewWarp.apply_maps(maps, images32[:, None])[0], torch.float32)
 
 
 def test_seed_matrix_layout() -> None:
     """G[(c, j, l), (s, j, l, k)] = I_s[c, j, k], nothing else."""
-    gen = _generator(2)
+    gen = generator(2)
     s, c, h, w = 2, 3, 3, 4
     images = torch.rand(s, c, h, w, generator=gen, dtype=torch.float64)
     images[0, 1, 2, 3] = 0.0  # zeros are not stored
@@ -148,7 +114,7 @@ def _eq4_loop(image: torch.Tensor, x3: torch.Tensor) -> tuple[torch.Tensor, torc
 
 @pytest.mark.parametrize("channels", [1, 3])
 def test_from_forward_map_equals_eq4_loop(channels: int) -> None:
-    gen = _generator(3)
+    gen = generator(3)
     h, w, t = 5, 7, 4
     image = torch.rand(channels, h, w, generator=gen, dtype=torch.float64)
     x1 = torch.arange(w, dtype=torch.float64).expand(h, w)
@@ -166,7 +132,7 @@ def test_from_forward_map_equals_eq4_loop(channels: int) -> None:
 
 
 def test_from_forward_map_nan_is_no_target() -> None:
-    gen = _generator(4)
+    gen = generator(4)
     image = torch.rand(1, 4, 6, generator=gen, dtype=torch.float64)
     x3 = torch.arange(6, dtype=torch.float64).expand(2, 4, 6) + 0.25
     x3_nan = x3.clone()
@@ -179,9 +145,9 @@ def test_from_forward_map_nan_is_no_target() -> None:
 
 # --------------------------------------------------------------------------- several objects
 def test_concat_is_views_side_by_side(dtype: torch.dtype) -> None:
-    img_a, maps_a = _setup(dtype, 3, 2, seed=5)
-    img_b, maps_b = _setup(dtype, 3, 1, seed=6)
-    img_c = torch.rand(3, H, W, generator=_generator(7), dtype=torch.float64).to(dtype)
+    img_a, maps_a = setup(dtype, 3, 2, seed=5)
+    img_b, maps_b = setup(dtype, 3, 1, seed=6)
+    img_c = torch.rand(3, H, W, generator=generator(7), dtype=torch.float64).to(dtype)
     ops = [
         SparseViewOperator.from_maps(img_a, maps_a),
         SparseViewOperator.from_maps(img_b, maps_b),
@@ -193,16 +159,16 @@ def test_concat_is_views_side_by_side(dtype: torch.dtype) -> None:
     assert op.C.shape == (op.G.shape[1], op.n_views)
     assert op.nnz == (sum(o.nnz[0] for o in ops), sum(o.nnz[1] for o in ops))
     assert op.C.is_coalesced() and torch.equal(op.C.indices(), op.C.coalesce().indices())
-    _assert_close(op.data_matrix(), torch.cat([o.data_matrix() for o in ops], dim=1), dtype)
-    _assert_close(op.views(), torch.cat([o.views() for o in ops]), dtype)
+    assert_close(op.data_matrix(), torch.cat([o.data_matrix() for o in ops], dim=1), dtype)
+    assert_close(op.views(), torch.cat([o.views() for o in ops]), dtype)
 
 
 def test_fit_sparse_equals_dense_fit(dtype: torch.dtype) -> None:
-    ops = [SparseViewOperator.from_maps(*_setup(dtype, 3, 2, seed=s)) for s in (8, 9)]
+    ops = [SparseViewOperator.from_maps(*setup(dtype, 3, 2, seed=s)) for s in (8, 9)]
     op = SparseViewOperator.concat(ops)
     sparse_fit = Eigenspace(n_components=3).fit_sparse(op.G, op.C, image_shape=op.image_shape, block_size=5)
     views = torch.cat(
-        [NovelViewWarp.apply_maps(m, i[:, None])[0] for i, m in (_setup(dtype, 3, 2, seed=s) for s in (8, 9))]
+        [NovelViewWarp.apply_maps(m, i[:, None])[0] for i, m in (setup(dtype, 3, 2, seed=s) for s in (8, 9))]
     )
     dense_fit = Eigenspace(n_components=3).fit(views)
     tol = 1e-3 if dtype == torch.float32 else 1e-9
@@ -215,7 +181,7 @@ def test_fit_sparse_equals_dense_fit(dtype: torch.dtype) -> None:
 
 # --------------------------------------------------------------------------- errors and repr
 def test_repr_and_nnz() -> None:
-    op = SparseViewOperator.from_maps(*_setup(torch.float64, 1, 2))
+    op = SparseViewOperator.from_maps(*setup(torch.float64, 1, 2))
     text = repr(op)
     assert text.startswith("SparseViewOperator(image_shape=(1, 12, 16), n_views=7")
     assert f"nnz={op.nnz[0]}" in text and f"nnz={op.nnz[1]}" in text
@@ -223,7 +189,7 @@ def test_repr_and_nnz() -> None:
 
 
 def test_from_maps_errors() -> None:
-    images, maps = _setup(torch.float64, 3, 2)
+    images, maps = setup(torch.float64, 3, 2)
     two = dataclasses.replace(
         maps, src_x=maps.src_x.expand(2, 2, -1, -1, -1), weight=maps.weight.expand(2, 2, -1, -1, -1)
     )
@@ -252,7 +218,7 @@ def test_from_maps_errors() -> None:
 
 
 def test_from_maps_row_layout_needs_rows_that_stay() -> None:
-    images, maps = _setup(torch.float64, 1, 2)
+    images, maps = setup(torch.float64, 1, 2)
     own_row = torch.arange(H, dtype=torch.float64).view(1, 1, 1, H, 1).expand_as(maps.src_x)
     same = SparseViewOperator.from_maps(images, dataclasses.replace(maps, src_y=own_row.clone()))
     assert same.layout == "row"
@@ -269,40 +235,14 @@ def test_from_maps_row_layout_needs_rows_that_stay() -> None:
         SparseViewOperator.from_maps(images, maps, layout="rows")
 
 
-def _maps_2d(dtype: torch.dtype, n_sources: int, seed: int = 1) -> WarpMaps:
-    """Smooth 2D target→source maps (a perspective-like warp), partly outside the image."""
-    gen = _generator(seed)
-    t = len(THETAS)
-    yy = torch.arange(H, dtype=torch.float64).view(H, 1).expand(H, W)
-    xx = torch.arange(W, dtype=torch.float64).view(1, W).expand(H, W)
-    src_x, src_y = [], []
-    for _ in range(n_sources * t):
-        p = torch.rand(4, generator=gen, dtype=torch.float64)
-        src_x.append(xx * (0.9 + 0.2 * p[0]) + 2 * torch.sin(yy / 3 + 6 * p[1]) - 0.7)
-        src_y.append(yy * (0.95 + 0.1 * p[2]) + 1.5 * torch.cos(xx / 4 + 6 * p[3]) + 0.3)
-    shape = (n_sources, 1, t, H, W)
-    weight = torch.rand(shape, generator=gen, dtype=torch.float64)
-    weight = weight / weight.sum(0, keepdim=True)
-    weight[..., :2, :3] = 0.0  # some target pixels take nothing
-    sx = torch.stack(src_x).view(shape)
-    sx[weight == 0] = 1e6  # ignored where the weight is zero
-    return WarpMaps(
-        sx.to(dtype),
-        weight.to(dtype),
-        weight > 0,
-        torch.tensor(THETAS),
-        torch.stack(src_y).view(shape).to(dtype),
-    )
-
-
 @pytest.mark.parametrize("n_sources", [1, 2])
 @pytest.mark.parametrize("channels", [1, 3])
 def test_image_layout_equals_kornia_2d_warp(dtype: torch.dtype, channels: int, n_sources: int) -> None:
     """Sec. 4: whole-image coefficient vectors give exactly the 2D-warped views."""
-    gen = _generator(5)
+    gen = generator(5)
     images = torch.rand(n_sources, channels, H, W, generator=gen, dtype=torch.float64).to(dtype)
     images[0, :, 3] = 0.0  # zeros are not stored in G
-    maps = _maps_2d(dtype, n_sources)
+    maps = maps_2d(dtype, n_sources)
     expected = NovelViewWarp.apply_maps(maps, images[:, None])[0]
     op = SparseViewOperator.from_maps(images, maps)
     n = H * W
@@ -311,12 +251,12 @@ def test_image_layout_equals_kornia_2d_warp(dtype: torch.dtype, channels: int, n
     assert op.G.is_coalesced() and op.C.is_coalesced()
     # At most four bilinear weights per target pixel, source and view.
     assert op.nnz[1] <= 4 * n * n_sources * len(THETAS)
-    _assert_close(op.views(), expected, dtype)
+    assert_close(op.views(), expected, dtype)
 
 
 def test_image_layout_matches_a_dense_g() -> None:
     """The stored G (only the columns C uses) gives the product of the full G of Sec. 4."""
-    gen = _generator(2)
+    gen = generator(2)
     h, w = 4, 5
     n = h * w
     images = torch.rand(2, 1, h, w, generator=gen, dtype=torch.float64)
@@ -359,8 +299,8 @@ def test_from_forward_map_errors() -> None:
 
 
 def test_concat_errors() -> None:
-    op = SparseViewOperator.from_maps(*_setup(torch.float64, 3, 1))
-    other = SparseViewOperator.from_maps(*_setup(torch.float64, 1, 1))
+    op = SparseViewOperator.from_maps(*setup(torch.float64, 3, 1))
+    other = SparseViewOperator.from_maps(*setup(torch.float64, 1, 1))
     with pytest.raises(ValueError, match="non-empty sequence"):
         SparseViewOperator.concat([])
     with pytest.raises(
@@ -371,7 +311,7 @@ def test_concat_errors() -> None:
         SparseViewOperator.concat([op, other])
     with pytest.raises(TypeError, match=r"ops\[1\] must be a SparseViewOperator"):
         SparseViewOperator.concat([op, op.G])  # type: ignore[list-item]
-    op32 = SparseViewOperator.from_maps(*_setup(torch.float32, 3, 1))
+    op32 = SparseViewOperator.from_maps(*setup(torch.float32, 3, 1))
     with pytest.raises(TypeError, match=r"ops\[1\] has dtype torch.float32"):
         SparseViewOperator.concat([op, op32])
 
@@ -389,149 +329,3 @@ def test_matches_kornia_at_coil_size_float32() -> None:
     expected = warp.apply_maps(maps, images[:, None])[0]
     actual = SparseViewOperator.from_maps(images, maps).views()
     assert float((actual - expected).abs().max()) <= 1e-5
-
-
-# --------------------------------------------------------------- Sec. 4.1: common factor
-def _pair_ops(images: torch.Tensor, layout: str) -> list[SparseViewOperator]:
-    """Operators of the consecutive seed pairs (0, 1) and (1, 2) of three seed views."""
-    ops = []
-    for n in range(images.shape[0] - 1):
-        gen = _generator(10 + n)
-        d12 = _smooth_disparity(gen, 2.0, images.dtype)
-        maps = NovelViewWarp(ALPHA).maps(correspondence_from_disparity(d12, -d12), THETAS[:4])
-        ops.append(SparseViewOperator.from_maps(images[n : n + 2], maps, layout=layout))
-    return ops
-
-
-@pytest.mark.parametrize("layout", ["row", "image"])
-@pytest.mark.parametrize("channels", [1, 2])
-def test_common_factor_equals_direct_form_with_full_row_rank(layout: str, channels: int) -> None:
-    images = torch.rand(3, channels, H, W, generator=_generator(3), dtype=torch.float64) + 0.1
-    ops = _pair_ops(images, layout)
-    direct = SparseViewOperator.concat(ops)
-    common = SparseViewOperator.common_factor(ops)
-    assert ops[0].full_row_rank()
-    assert common.G is ops[0].G and common.n_views == direct.n_views == 8
-    assert common.C.shape == (ops[0].G.shape[1], 8)
-    torch.testing.assert_close(common.data_matrix(), direct.data_matrix(), rtol=0, atol=1e-12)
-    # The first pair's columns are C1 itself; the others are denser.
-    assert torch.equal(common.C.to_dense()[:, :4], ops[0].C.to_dense())
-
-
-def test_common_factor_needs_full_row_rank() -> None:
-    """An all-black row in the first pair's seeds (COIL's background) breaks the rank."""
-    images = torch.rand(3, 1, H, W, generator=_generator(4), dtype=torch.float64) + 0.1
-    images[:2, :, 2] = 0.0  # row 2 black in both seeds of the first pair only
-    ops = _pair_ops(images, "row")
-    assert not ops[0].full_row_rank() and ops[1].full_row_rank()
-    direct = SparseViewOperator.concat(ops).views()
-    common = SparseViewOperator.common_factor(ops).views()
-    # Row 2 of the second pair's views holds the third seed's content, which G1 cannot
-    # span: the common form zeroes it; every other row agrees.
-    assert float(direct[4:, :, 2].abs().max()) > 0.1
-    assert float(common[4:, :, 2].abs().max()) == 0.0
-    keep = torch.ones(H, dtype=torch.bool)
-    keep[2] = False
-    torch.testing.assert_close(common[:, :, keep], direct[:, :, keep], rtol=0, atol=1e-12)
-    # Black in every seed (a background row of all views): rank-deficient, yet equal.
-    images[2, :, 2] = 0.0
-    ops = _pair_ops(images, "row")
-    assert not ops[0].full_row_rank()
-    torch.testing.assert_close(
-        SparseViewOperator.common_factor(ops).views(),
-        SparseViewOperator.concat(ops).views(),
-        rtol=0,
-        atol=1e-12,
-    )
-
-
-# --------------------------------------------------------------------------- silhouette-aware weights
-def _blob_masks(n_sources: int, seed: int) -> torch.Tensor:
-    """(S, H, W) bool foreground: an off-centre ellipse per seed (a silhouette to cross)."""
-    gen = _generator(seed)
-    yy = torch.arange(H, dtype=torch.float64).view(H, 1)
-    xx = torch.arange(W, dtype=torch.float64).view(1, W)
-    out = []
-    for _ in range(n_sources):
-        cy, cx = H / 2 + torch.rand(1, generator=gen).item(), W / 2 + 2 * torch.rand(1, generator=gen).item()
-        out.append(((yy - cy) / (0.38 * H)) ** 2 + ((xx - cx) / (0.33 * W)) ** 2 <= 1)
-    return torch.stack(out)
-
-
-def _silhouette_loop(images: torch.Tensor, maps: WarpMaps, masks: torch.Tensor) -> torch.Tensor:
-    """Slow reference: per target pixel, the bilinear taps of every source with the blend
-    weight, foreground taps only, renormalized; background below a foreground share of 1/2."""
-    s, _, t, h, w = maps.src_x.shape
-    img, fg = images.double(), masks.double()
-    out = torch.zeros(t, images.shape[1], h, w, dtype=torch.float64)
-    for ti in range(t):
-        for j in range(h):
-            for q in range(w):
-                num, share = torch.zeros(images.shape[1], dtype=torch.float64), 0.0
-                for si in range(s):
-                    wt = float(maps.weight[si, 0, ti, j, q])
-                    if wt == 0:
-                        continue
-                    x = float(maps.src_x[si, 0, ti, j, q])
-                    y = float(j if maps.src_y is None else maps.src_y[si, 0, ti, j, q])
-                    x0, y0 = math.floor(x), math.floor(y)
-                    for yy, xx in ((y0, x0), (y0, x0 + 1), (y0 + 1, x0), (y0 + 1, x0 + 1)):
-                        tent = (1 - abs(x - xx)) * (1 - abs(y - yy))
-                        if 0 <= xx < w and 0 <= yy < h and tent > 0 and fg[si, yy, xx] > 0:
-                            num += wt * tent * img[si, :, yy, xx]
-                            share += wt * tent
-                if share >= 0.5:
-                    out[ti, :, j, q] = num / share
-    return out.to(images.dtype)
-
-
-@pytest.mark.parametrize("layout", ["row", "image"])
-@pytest.mark.parametrize("n_sources", [1, 2])
-def test_silhouette_aware_weights(dtype: torch.dtype, layout: str, n_sources: int) -> None:
-    """G·C with masks equals NovelViewWarp.apply_maps with masks and a slow loop, in both
-    layouts; no foreground pixel of the result mixes in background."""
-    images, maps = _setup(dtype, 2, n_sources, amplitude=2.5, seed=3)
-    masks = _blob_masks(n_sources, seed=4)
-    # Foreground well above 0 and a zero background: a tap of background mixed in would
-    # pull a pixel below 0.5.
-    images = (images + 0.5) * masks[:, None]
-    expected = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
-    op = SparseViewOperator.from_maps(images, maps, layout=layout, masks=masks)
-    _assert_close(op.views(), expected, dtype)
-    assert float((expected - _silhouette_loop(images, maps, masks)).abs().max()) <= TOL[dtype]
-    fore = expected.amax(dim=1) > 0
-    assert bool(fore.any()) and bool((expected.amin(dim=1)[fore] >= 0.5 - TOL[dtype]).all())
-    # Without masks the silhouette's pixels mix in the zero background.
-    plain = NovelViewWarp.apply_maps(maps, images[:, None])[0]
-    assert float(plain.amax(dim=1)[plain.amax(dim=1) > 0].min()) < 0.5
-
-
-def test_silhouette_aware_2d_maps(dtype: torch.dtype) -> None:
-    maps = _maps_2d(dtype, 2)
-    images = torch.rand(2, 1, H, W, generator=_generator(6), dtype=torch.float64).to(dtype) + 0.5
-    masks = _blob_masks(2, seed=7)
-    expected = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
-    _assert_close(SparseViewOperator.from_maps(images, maps, masks=masks).views(), expected, dtype)
-    assert float((expected - _silhouette_loop(images, maps, masks)).abs().max()) <= TOL[dtype]
-
-
-def test_silhouette_masks_any_dtype() -> None:
-    """Non-zero is foreground in both paths, whatever the masks' dtype (0/255 uint8, 0/0.4 float)."""
-    images, maps = _setup(torch.float64, 1, 2, seed=8)
-    masks = _blob_masks(2, seed=9)
-    ref = NovelViewWarp.apply_maps(maps, images[:, None], masks[:, None])[0]
-    for m in (masks.to(torch.uint8) * 255, masks.double() * 0.4):
-        torch.testing.assert_close(NovelViewWarp.apply_maps(maps, images[:, None], m[:, None])[0], ref)
-        torch.testing.assert_close(SparseViewOperator.from_maps(images, maps, masks=m).views(), ref)
-
-
-def test_silhouette_masks_errors() -> None:
-    images, maps = _setup(torch.float64, 1, 2)
-    with pytest.raises(
-        ValueError, match=r"masks must have shape \(S, H, W\) = \(2, 12, 16\), got \(1, 12, 16\)"
-    ):
-        SparseViewOperator.from_maps(images, maps, masks=torch.ones(1, H, W, dtype=torch.bool))
-    with pytest.raises(TypeError, match="masks must be a tensor, got list"):
-        SparseViewOperator.from_maps(images, maps, masks=[[1.0]])  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match=r"masks must have shape \(S, B, H, W\) = \(2, 1, 12, 16\)"):
-        NovelViewWarp.apply_maps(maps, images[:, None], torch.ones(2, H, W))

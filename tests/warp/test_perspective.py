@@ -10,6 +10,7 @@ import torch
 
 from torch_eigview.datasets import PerspectiveCamera, exact_correspondence_2d, make_object, render
 from torch_eigview.geometry.correspondence import correspondence_from_disparity
+from torch_eigview.warp.novel_view import NovelViewWarp
 from torch_eigview.warp.operator import SparseViewOperator
 from torch_eigview.warp.perspective import PerspectiveWarp, turntable_pose
 
@@ -120,6 +121,22 @@ def test_bad_input(camera: PerspectiveCamera) -> None:
     flat = correspondence_from_disparity(torch.zeros(SIZE, SIZE))
     with pytest.raises(ValueError, match=r"correspondence must be 2D for a perspective camera"):
         PerspectiveWarp(ALPHA, k, 4.0).maps(flat, [5.0])
+    with pytest.raises(ValueError, match=r"grow=-1 must be >= 0"):
+        PerspectiveWarp(ALPHA, k, 4.0, grow=-1)
+    with pytest.raises(TypeError, match=r"grow must be an integer"):
+        PerspectiveWarp(ALPHA, k, 4.0, grow=1.5)  # type: ignore[arg-type]
+
+
+def test_no_orthographic_settings(camera: PerspectiveCamera) -> None:
+    """The perspective warp has none of the orthographic camera's settings, and its repr
+    names its own."""
+    warp = PerspectiveWarp(ALPHA, camera._k, camera.distance)
+    for name in ("center", "elevation", "camera", "depth_sign"):
+        assert not hasattr(warp, name), name
+    assert not isinstance(warp, NovelViewWarp)
+    assert repr(warp) == (
+        "PerspectiveWarp(alpha=10.0, distance=4.0, max_stretch=3.0, line='perpendicular', blend='linear')"
+    )
 
 
 def test_device_and_dtype_kept(scene: tuple, camera: PerspectiveCamera, device: torch.device) -> None:

@@ -122,7 +122,7 @@ def _is_plain_orthographic(camera: AffineCamera | PerspectiveCamera) -> bool:
 
 def camera_warp(
     camera: AffineCamera | PerspectiveCamera, alpha: float, blend: str = "linear"
-) -> NovelViewWarp:
+) -> NovelViewWarp | PerspectiveWarp:
     """The warp of a camera model: Eq. 7 (orthographic), Sec. 4's affine solve or trifocal
     transfer; ``blend`` as :class:`~torch_eigview.warp.novel_view.NovelViewWarp`'s."""
     if isinstance(camera, PerspectiveCamera):

@@ -17,14 +17,12 @@ from torch_eigview.geometry.pose import (
     rotation_y,
 )
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.geometry.transfer import epipoles_from_tensor, fundamental_from_tensor, transfer_points
 from torch_eigview.geometry.trifocal import (
-    epipoles_from_tensor,
-    fundamental_from_tensor,
     novel_view_tensor,
     novel_view_tensor_from_cameras,
     seed_tensor,
     tensor_from_fundamental,
-    transfer_points,
     transform_tensor,
     trifocal_tensor,
 )

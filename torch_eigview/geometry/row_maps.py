@@ -58,22 +58,52 @@ def invert_row_map(
     # slot m is column col0 + m and exists iff m <= room (at most W slots, whatever the span).
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.where(seg_ok, torch.floor(f1).clamp(max=w - 1) - col0, -1.0)
+    idx, key, src = _segment_columns(f0, length, depth, col0, room)
+    # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
+    best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
+    best.scatter_reduce_(0, idx, key, reduce="amax")
+    win = key >= best.index_select(0, idx)
+    out = torch.full((n + 1,), math.nan, dtype=dtype, device=device)
+    out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax", include_self=False)
+    hit = best[:n] != -math.inf
+    return out[:n].view(b, t, h, w), hit.view(b, t, h, w)
 
-    def interpolate(
-        frac: torch.Tensor, lo: torch.Tensor, d0: torch.Tensor | None, d1: torch.Tensor | None
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        src = lo + frac
-        key = src if d0 is None or d1 is None else d0 + (d1 - d0) * frac
-        return src, key
 
+def _interpolate(
+    frac: torch.Tensor, lo: torch.Tensor, d0: torch.Tensor | None, d1: torch.Tensor | None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Source column ``lo + frac`` inside a segment and its z-buffer key (the depth
+    interpolated, or the source column itself without depth)."""
+    src = lo + frac
+    key = src if d0 is None or d1 is None else d0 + (d1 - d0) * frac
+    return src, key
+
+
+def _segment_columns(
+    f0: torch.Tensor, length: torch.Tensor, depth: torch.Tensor | None, col0: torch.Tensor, room: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Every (segment, target column) pair of :func:`invert_row_map`, flat.
+
+    Segment k of a row (source pixels k, k + 1) starts at target column ``f0`` and spans
+    ``length`` columns; it covers the integer columns ``col0 + m`` for ``0 <= m <= room``
+    (all (B, T, H, W - 1); ``room`` -1 for none). ``depth`` (B, T, H, W) or None.
+
+    Returns:
+        ``(idx, key, src)``, each (P,): the flat target pixel (B·T·H·W, a spare slot, with
+        key -inf where slot 0 is no target column), the z-buffer key and the source column.
+    """
+    b, t, h, w1 = f0.shape
+    w = w1 + 1
+    dtype, device = f0.dtype, f0.device
+    n = b * t * h * w
     # Slot 0, every segment at once (most segments cover at most one column: views
-    # foreshorten). Entries that are no target column go to a spare slot n with key -inf.
+    # foreshorten).
     lo_col = torch.arange(w - 1, dtype=dtype, device=device)
     ok0 = room >= 0
     frac0 = (col0 - f0) / length
     d0 = None if depth is None else depth[..., :-1]
     d1 = None if depth is None else depth[..., 1:]
-    src0, key0 = interpolate(frac0, lo_col, d0, d1)
+    src0, key0 = _interpolate(frac0, lo_col, d0, d1)
     row0 = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
     idx0 = torch.where(ok0, row0 + col0.clamp(max=w - 1).long(), n).reshape(-1)
     key0 = torch.where(ok0, key0, -math.inf).reshape(-1)
@@ -89,21 +119,14 @@ def invert_row_map(
         lo = (seg % (w - 1)).to(dtype)
         dd0 = None if d0 is None else d0.reshape(-1).index_select(0, seg)
         dd1 = None if d1 is None else d1.reshape(-1).index_select(0, seg)
-        src_m, key_m = interpolate(frac, lo, dd0, dd1)
+        src_m, key_m = _interpolate(frac, lo, dd0, dd1)
         idx_parts.append((seg // (w - 1)) * w + col.long())
         key_parts.append(key_m)
         src_parts.append(src_m)
         m += 1
         cand = cand[room_flat.index_select(0, cand) >= m]
     idx, key, src = (torch.cat(p) if len(p) > 1 else p[0] for p in (idx_parts, key_parts, src_parts))
-    # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
-    best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
-    best.scatter_reduce_(0, idx, key, reduce="amax")
-    win = key >= best.index_select(0, idx)
-    out = torch.full((n + 1,), math.nan, dtype=dtype, device=device)
-    out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax", include_self=False)
-    hit = best[:n] != -math.inf
-    return out[:n].view(b, t, h, w), hit.view(b, t, h, w)
+    return idx, key, src
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:

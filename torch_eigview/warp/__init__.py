@@ -4,8 +4,10 @@ perspective), size normalization and the sparse G·C operator (Eqs. 3–6).
 
 from __future__ import annotations
 
+from torch_eigview.warp.base import BLENDS
+from torch_eigview.warp.maps import WarpMaps
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent
-from torch_eigview.warp.novel_view import BLENDS, NovelViewWarp, WarpMaps
+from torch_eigview.warp.novel_view import NovelViewWarp
 from torch_eigview.warp.operator import SparseViewOperator
 from torch_eigview.warp.perspective import PerspectiveWarp, turntable_pose
 from torch_eigview.warp.raster import invert_map_2d

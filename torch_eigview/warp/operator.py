@@ -2,14 +2,10 @@
 
 Convention:
     Images are (C, H, W); x is the column, y the row; pixel centres at integers. A view
-    is flattened row-major over (C, H, W), so row ``r = (c, j, l)`` of A is
-    ``c·H·W + j·W + l``. For S seed views, G is (C·H·W, S·H·W·W): row ``(c, j, l)`` holds
-    seed row ``I_s[c, j, :]`` in column block ``(s, j, l)``, i.e.
-    ``G[(c, j, l), (s, j, l, k)] = I_s[c, j, k]`` with column index
-    ``s·H·W·W + (j·W + l)·W + k``. Column t of C holds, at rows ``(s, j, l, k)``, the
-    interpolation coefficients ``y_k`` of target pixel (j, l) of view t (Eq. 3's
-    ``C_j^l``), with the blend weight of seed view s folded in; coefficients do not
-    depend on the channel. Hence ``(G·C)[(c, j, l), t] = Σ_s Σ_k I_s[c, j, k] · y_k``.
+    is flattened row-major over (C, H, W) into a column of A; G holds the seed views'
+    rows (or whole images) in one column block per target pixel and C the interpolation
+    coefficients of each target pixel (Eq. 3's ``C_j^l``), the blend weights folded in:
+    the exact index layout is in :mod:`torch_eigview.warp.coefficients`.
 
 Two ways to fill C:
     * ``"gather"`` (:meth:`SparseViewOperator.from_maps`): target→source maps, the tent
@@ -46,148 +42,19 @@ from dataclasses import dataclass
 import torch
 
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim
-from torch_eigview.warp.novel_view import WarpMaps, _renormalize
+from torch_eigview.warp.coefficients import (
+    _gather_coefficients,
+    _gather_coefficients_2d,
+    _image_seed_matrix,
+    _seed_matrix,
+    _splat_coefficients,
+)
+from torch_eigview.warp.maps import WarpMaps
 
 __all__ = ["SparseViewOperator"]
 
 _MODES = ("gather",)
 LAYOUTS = ("row", "image")
-
-
-def _seed_matrix(images: torch.Tensor) -> torch.Tensor:
-    """G = [G_1 … G_S], (C·H·W, S·H·W·W), from seed images (S, C, H, W); zeros left out."""
-    s, c, h, w = images.shape
-    # Flat positions p over (c, j, l, s, k) are sorted by (row, column): G is built coalesced.
-    values = images.permute(1, 2, 0, 3)[:, :, None].expand(c, h, w, s, w).reshape(-1)
-    p = values.nonzero().squeeze(1)
-    rows = p // (s * w)
-    sk = p % (s * w)
-    cols = (sk // w) * (h * w * w) + (rows % (h * w)) * w + sk % w
-    return torch.sparse_coo_tensor(
-        torch.stack([rows, cols]),
-        values[p],
-        (c * h * w, s * h * w * w),
-        is_coalesced=True,
-        check_invariants=False,
-    )
-
-
-def _sparse(
-    rows: torch.Tensor, cols: torch.Tensor, values: torch.Tensor, size: tuple[int, int]
-) -> torch.Tensor:
-    return torch.sparse_coo_tensor(torch.stack([rows, cols]), values, size, check_invariants=False).coalesce()
-
-
-def _silhouette_normalize(tent: torch.Tensor, inside: torch.Tensor, fg: torch.Tensor) -> torch.Tensor:
-    """Tap weights (S, T, H, W, K) restricted to foreground taps and renormalized per
-    target pixel over all taps of all sources; 0 where the foreground share is below 1/2
-    (``NovelViewWarp.apply_maps`` with ``masks``). ``fg`` (S, T, H, W, K): the tap's mask."""
-    tent = tent * (fg & inside).to(tent.dtype)
-    return _renormalize(tent, tent.sum(dim=(0, -1), keepdim=True))
-
-
-def _gather_coefficients(
-    src_x: torch.Tensor, weight: torch.Tensor, masks: torch.Tensor | None = None
-) -> torch.Tensor:
-    """C (S·H·W·W, T) from target→source maps and blend weights, both (S, T, H, W), and
-    optional (S, H, W) seed masks (silhouette-aware weights)."""
-    s, t, h, w = src_x.shape
-    dev = src_x.device
-    use = weight != 0
-    # Clamping keeps floor() in the int64 range; beyond [-1, W] no neighbour is inside.
-    x = torch.where(use, src_x, 0.0).clamp(-2.0, w + 1.0)
-    # kornia's remap normalizes pixel columns to [-1, 1] and grid_sample maps them back; in
-    # float32 that round trip moves x by ~W·eps. Take the same round trip, so that C holds
-    # the weights grid sampling actually applies, not the ones it would in exact arithmetic.
-    x = ((2.0 / (w - 1)) * x - 1 + 1) * ((w - 1) / 2) if w > 1 else x
-    k0 = x.floor()
-    frac = x - k0
-    k = torch.stack([k0, k0 + 1], dim=-1)  # (S, T, H, W, 2)
-    # Eq. 4 from the target's side: 1 - |x - k| for the two neighbours k of x.
-    tent = torch.stack([1 - frac, frac], dim=-1) * weight[..., None]
-    inside = (k >= 0) & (k <= w - 1)
-    if masks is not None:
-        row_of = torch.arange(h, device=dev).view(1, 1, h, 1, 1) * w
-        flat = masks.reshape(s, 1, h * w).expand(s, t, h * w)
-        fg = flat.gather(2, (row_of + k.long().clamp(0, w - 1)).reshape(s, t, -1)).view_as(tent) != 0
-        tent = _silhouette_normalize(tent, inside, fg)
-    keep = use[..., None] & inside & (tent != 0)
-    block = torch.arange(s, device=dev).view(s, 1, 1, 1, 1) * (h * w * w)
-    jl = torch.arange(h * w, device=dev).view(1, 1, h, w, 1)
-    rows = block + jl * w + k.long()
-    cols = torch.arange(t, device=dev).view(1, t, 1, 1, 1).expand_as(rows)
-    return _sparse(rows[keep], cols[keep], tent[keep], (s * h * w * w, t))
-
-
-def _gather_coefficients_2d(
-    src_x: torch.Tensor, src_y: torch.Tensor, weight: torch.Tensor, masks: torch.Tensor | None = None
-) -> torch.Tensor:
-    """C (S·(H·W)², T) of a 2D warp from maps and blend weights, all (S, T, H, W), and
-    optional (S, H, W) seed masks (silhouette-aware weights).
-
-    Four bilinear weights per target pixel p at its source position (x, y): rows
-    ``(s, p, q)`` for the source pixels q = (y0 + dy, x0 + dx) inside the image.
-    """
-    s, t, h, w = src_x.shape
-    dev = src_x.device
-    n = h * w
-    use = weight != 0
-    # The pixel -> normalized -> pixel round trip of kornia's remap, as in the row case.
-    x = torch.where(use, src_x, 0.0).clamp(-2.0, w + 1.0)
-    y = torch.where(use, src_y, 0.0).clamp(-2.0, h + 1.0)
-    x = ((2.0 / (w - 1)) * x - 1 + 1) * ((w - 1) / 2) if w > 1 else x
-    y = ((2.0 / (h - 1)) * y - 1 + 1) * ((h - 1) / 2) if h > 1 else y
-    x0, y0 = x.floor(), y.floor()
-    fx, fy = x - x0, y - y0
-    xs = torch.stack([x0, x0 + 1, x0, x0 + 1], dim=-1)  # (S, T, H, W, 4)
-    ys = torch.stack([y0, y0, y0 + 1, y0 + 1], dim=-1)
-    tent = torch.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], dim=-1)
-    tent = tent * weight[..., None]
-    inside = (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
-    if masks is not None:
-        q = ys.long().clamp(0, h - 1) * w + xs.long().clamp(0, w - 1)
-        flat = masks.reshape(s, 1, n).expand(s, t, n)
-        fg = flat.gather(2, q.reshape(s, t, -1)).view_as(tent) != 0
-        tent = _silhouette_normalize(tent, inside, fg)
-    keep = use[..., None] & inside & (tent != 0)
-    block = torch.arange(s, device=dev).view(s, 1, 1, 1, 1) * (n * n)
-    p = torch.arange(n, device=dev).view(1, 1, h, w, 1)
-    rows = block + p * n + ys.long() * w + xs.long()
-    cols = torch.arange(t, device=dev).view(1, t, 1, 1, 1).expand_as(rows)
-    return _sparse(rows[keep], cols[keep], tent[keep], (s * n * n, t))
-
-
-def _image_seed_matrix(images: torch.Tensor, c_mat: torch.Tensor) -> torch.Tensor:
-    """G (C·H·W, S·(H·W)²) of the whole-image layout, stored at the columns C uses."""
-    s, ch, h, w = images.shape
-    n = h * w
-    used = c_mat.indices()[0].unique()  # sorted
-    src, rem = used // (n * n), used % (n * n)
-    p, q = rem // n, rem % n
-    flat = images.reshape(s, ch, n)
-    values = flat[src, :, q].T  # (C, U)
-    rows = torch.arange(ch, device=images.device)[:, None] * n + p[None]
-    cols = used[None].expand(ch, -1)
-    keep = values != 0
-    return _sparse(rows[keep], cols[keep], values[keep], (ch * n, s * n * n))
-
-
-def _splat_coefficients(dst_x_for_src: torch.Tensor) -> torch.Tensor:
-    """C (H·W·W, T) from the forward map x3 (T, H, W) of each source pixel; NaN: no target."""
-    t, h, w = dst_x_for_src.shape
-    dev = dst_x_for_src.device
-    ok = ~torch.isnan(dst_x_for_src)
-    x = torch.where(ok, dst_x_for_src, -2.0).clamp(-2.0, w + 1.0)
-    l0 = x.floor()
-    cols_l = torch.stack([l0, l0 + 1], dim=-1)  # (T, H, W_src, 2) target columns
-    # Eq. 4 literally: y_k = 1 - dist with dist = |x3_k - l|, kept where dist < 1.
-    y = 1 - (x[..., None] - cols_l).abs()
-    keep = ok[..., None] & (cols_l >= 0) & (cols_l <= w - 1) & (y > 0)
-    j = torch.arange(h, device=dev).view(1, h, 1, 1)
-    k = torch.arange(w, device=dev).view(1, 1, w, 1)
-    rows = (j * w + cols_l.long()) * w + k
-    cols = torch.arange(t, device=dev).view(t, 1, 1, 1).expand_as(rows)
-    return _sparse(rows[keep], cols[keep], y[keep], (h * w * w, t))
 
 
 def _gram_blocks(op: SparseViewOperator) -> torch.Tensor:
@@ -202,6 +69,59 @@ def _gram_blocks(op: SparseViewOperator) -> torch.Tensor:
     blocks = torch.zeros(n, ch, ch, dtype=op.G.dtype, device=op.G.device)
     blocks.index_put_((r1 % n, r1 // n, r2 // n), v, accumulate=True)
     return blocks
+
+
+def _checked_maps(maps: object, imgs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """``(src_x, weight, rows_move)`` of :meth:`SparseViewOperator.from_maps`'s ``maps``,
+    validated against the seed images (S, C, H, W); ``rows_move``: ``src_y`` leaves a
+    target pixel's own row somewhere it has weight."""
+    if not isinstance(maps, WarpMaps):
+        raise TypeError(f"maps must be a WarpMaps (NovelViewWarp.maps), got {type(maps).__name__}")
+    src_x = check_float_tensor(maps.src_x, "maps.src_x")
+    weight = check_float_tensor(maps.weight, "maps.weight")
+    check_ndim(src_x, "maps.src_x", (5,), "(S, B, T, H, W)")
+    if weight.shape != src_x.shape:
+        raise ValueError(
+            f"maps.weight must have the shape of maps.src_x {tuple(src_x.shape)}, got {tuple(weight.shape)}"
+        )
+    s, b, _, h, w = src_x.shape
+    if b != 1:
+        raise ValueError(f"maps must describe one object (B = 1), got B={b}; split the batch per object")
+    if (s, h, w) != (imgs.shape[0], imgs.shape[2], imgs.shape[3]):
+        raise ValueError(
+            f"images must have shape (S, C, H, W) = ({s}, C, {h}, {w}) to match maps.src_x "
+            f"{tuple(src_x.shape)}, got {tuple(imgs.shape)}"
+        )
+    if maps.src_y is None:
+        return src_x, weight, False
+    src_y = check_float_tensor(maps.src_y, "maps.src_y")
+    if src_y.shape != src_x.shape:
+        raise ValueError(
+            f"maps.src_y must have the shape of maps.src_x {tuple(src_x.shape)}, got {tuple(src_y.shape)}"
+        )
+    own_row = torch.arange(h, device=src_y.device).view(1, 1, 1, h, 1)
+    return src_x, weight, not bool(((src_y == own_row) | (weight == 0)).all())
+
+
+def _use_image_layout(layout: str, rows_move: bool) -> bool:
+    """Whether :meth:`SparseViewOperator.from_maps` builds the whole-image layout."""
+    if layout not in LAYOUTS and layout != "auto":
+        raise ValueError(f"layout must be 'auto' or one of {LAYOUTS}, got {layout!r}")
+    if layout == "row" and rows_move:
+        raise ValueError(
+            "layout='row' needs maps.src_y None or each target pixel's own row (Eqs. 3–6 warp "
+            "row by row), got rows that move: use layout='image' (Sec. 4's whole-image vectors)"
+        )
+    return layout == "image" or (layout == "auto" and rows_move)
+
+
+def _checked_masks(masks: object, shape: tuple[int, int, int]) -> torch.Tensor:
+    """Seed masks of shape (S, H, W), detached."""
+    if not isinstance(masks, torch.Tensor):
+        raise TypeError(f"masks must be a tensor, got {type(masks).__name__}")
+    if masks.shape != shape:
+        raise ValueError(f"masks must have shape (S, H, W) = {shape}, got {tuple(masks.shape)}")
+    return masks.detach()
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -271,47 +191,11 @@ class SparseViewOperator:
         if not isinstance(mode, str) or mode not in _MODES:
             hint = " (splat needs the forward map: use from_forward_map)" if mode == "splat" else ""
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}{hint}")
-        if not isinstance(maps, WarpMaps):
-            raise TypeError(f"maps must be a WarpMaps (NovelViewWarp.maps), got {type(maps).__name__}")
-        src_x = check_float_tensor(maps.src_x, "maps.src_x")
-        weight = check_float_tensor(maps.weight, "maps.weight")
-        check_ndim(src_x, "maps.src_x", (5,), "(S, B, T, H, W)")
-        if weight.shape != src_x.shape:
-            raise ValueError(
-                f"maps.weight must have the shape of maps.src_x {tuple(src_x.shape)}, "
-                f"got {tuple(weight.shape)}"
-            )
-        s, b, t, h, w = src_x.shape
-        if b != 1:
-            raise ValueError(f"maps must describe one object (B = 1), got B={b}; split the batch per object")
-        if (s, h, w) != (imgs.shape[0], imgs.shape[2], imgs.shape[3]):
-            raise ValueError(
-                f"images must have shape (S, C, H, W) = ({s}, C, {h}, {w}) to match maps.src_x "
-                f"{tuple(src_x.shape)}, got {tuple(imgs.shape)}"
-            )
-        rows_move = False
-        if maps.src_y is not None:
-            src_y = check_float_tensor(maps.src_y, "maps.src_y")
-            if src_y.shape != src_x.shape:
-                raise ValueError(
-                    f"maps.src_y must have the shape of maps.src_x {tuple(src_x.shape)}, got {tuple(src_y.shape)}"
-                )
-            own_row = torch.arange(h, device=src_y.device).view(1, 1, 1, h, 1)
-            rows_move = not bool(((src_y == own_row) | (weight == 0)).all())
-        if layout not in LAYOUTS and layout != "auto":
-            raise ValueError(f"layout must be 'auto' or one of {LAYOUTS}, got {layout!r}")
-        if layout == "row" and rows_move:
-            raise ValueError(
-                "layout='row' needs maps.src_y None or each target pixel's own row (Eqs. 3–6 warp "
-                "row by row), got rows that move: use layout='image' (Sec. 4's whole-image vectors)"
-            )
-        use_image = layout == "image" or (layout == "auto" and rows_move)
+        src_x, weight, rows_move = _checked_maps(maps, imgs)
+        use_image = _use_image_layout(layout, rows_move)
+        s, _, t, h, w = src_x.shape
         if masks is not None:
-            if not isinstance(masks, torch.Tensor):
-                raise TypeError(f"masks must be a tensor, got {type(masks).__name__}")
-            if masks.shape != (s, h, w):
-                raise ValueError(f"masks must have shape (S, H, W) = {(s, h, w)}, got {tuple(masks.shape)}")
-            masks = masks.detach().to(imgs.device)
+            masks = _checked_masks(masks, (s, h, w)).to(imgs.device)
         check_finite(weight, "maps.weight")
         check_finite(src_x[weight != 0], "maps.src_x (where maps.weight is non-zero)")
         # The maps are cast to the image dtype first, as NovelViewWarp.apply_maps does.

@@ -26,11 +26,13 @@ import math
 import torch
 from kornia.geometry.epipolar import triangulate_points
 
-from torch_eigview.check import as_angle_tensor, check_number
+from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.pose import rotation_y
-from torch_eigview.geometry.trifocal import novel_view_tensor_from_cameras, transfer_points
-from torch_eigview.warp.novel_view import NovelViewWarp, WarpMaps
+from torch_eigview.geometry.transfer import transfer_points
+from torch_eigview.geometry.trifocal import novel_view_tensor_from_cameras
+from torch_eigview.warp.base import ViewWarp
+from torch_eigview.warp.maps import WarpMaps
 from torch_eigview.warp.raster import invert_map_2d
 
 __all__ = ["PerspectiveWarp", "turntable_pose"]
@@ -97,7 +99,7 @@ def _check_intrinsics(k: object) -> torch.Tensor:
     return k64
 
 
-class PerspectiveWarp(NovelViewWarp):
+class PerspectiveWarp(ViewWarp):
     """Synthesizes the views I_θ of an object from two seed views of a perspective camera.
 
     The seed views are the camera (intrinsics ``K``, at ``distance`` from the rotation
@@ -115,7 +117,7 @@ class PerspectiveWarp(NovelViewWarp):
         max_stretch: a forward-mapped triangle edge longer than this (pixels) is a depth
             jump, not a surface.
         line: the line through the match in the other seed view used for the transfer
-            (:func:`~torch_eigview.geometry.trifocal.transfer_points`).
+            (:func:`~torch_eigview.geometry.transfer.transfer_points`).
         grow: pixels by which each seed's map is continued beyond what it hits, for the
             target pixels that neither seed hits (the silhouette's last half pixel,
             whose source lies between a foreground and a background seed pixel).
@@ -150,9 +152,7 @@ class PerspectiveWarp(NovelViewWarp):
         if line not in ("perpendicular", "vertical", "paper"):
             raise ValueError(f"line must be 'perpendicular', 'vertical' or 'paper', got {line!r}")
         self.line = line
-        if isinstance(grow, bool) or not isinstance(grow, int) or grow < 0:
-            raise ValueError(f"grow must be a non-negative int (pixels), got {grow!r}")
-        self.grow = grow
+        self.grow = check_int(grow, "grow", minimum=0)
 
     def extra_repr(self) -> str:
         return (
@@ -222,20 +222,15 @@ class PerspectiveWarp(NovelViewWarp):
             n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
 
         Returns:
-            :class:`~torch_eigview.warp.novel_view.WarpMaps` with S = ``n_sources``.
+            :class:`~torch_eigview.warp.maps.WarpMaps` with S = ``n_sources``.
         """
-        if n_sources not in (1, 2):
-            raise ValueError(f"n_sources must be 1 or 2, got {n_sources}")
+        self._check_n_sources(n_sources)
         if correspondence.vertical_12 is None or (n_sources == 2 and correspondence.vertical_21 is None):
             raise ValueError(
                 "correspondence must be 2D for a perspective camera (vertical_12 and vertical_21 set, "
                 "as estimate_correspondence returns), got a horizontal-only one"
             )
-        theta = as_angle_tensor(thetas, "thetas")
-        if bool((theta.abs() >= 90).any()):
-            raise ValueError(
-                f"thetas must lie within (-90, 90) degrees of the first seed view, got {theta.tolist()}"
-            )
+        theta = self._novel_angles(thetas)
         dtype = correspondence.disparity_12.dtype
         src1, srcy1, hit1, cov1 = self._source(
             theta,

@@ -245,20 +245,29 @@ def invert_map_2d(
     src_x = torch.full((n,), math.nan, dtype=dtype, device=device)
     src_y = torch.full((n,), math.nan, dtype=dtype, device=device)
     hit = torch.zeros(n, dtype=torch.bool, device=device)
+    if h >= 2 and w >= 2 and n > 0:
+        x, y = x.to(dtype).contiguous(), y.to(dtype).contiguous()
+        valid = valid[:, None] if valid.ndim == 3 else valid
+        if depth is not None:
+            depth = depth.to(dtype)
+            valid = valid & torch.isfinite(depth)
+        tol = _edge_tolerance(dtype)
+        hits = _candidate_hits(_cells(x, y, valid, stretch, tol), w, tol)
+        _zbuffer(_hit_positions(hits, depth, h, w), src_x, src_y, hit)
     shape = (b, t, h, w)
-    if h < 2 or w < 2 or n == 0:
-        return src_x.view(shape).to(out_dtype), src_y.view(shape).to(out_dtype), hit.view(shape)
-    x, y = x.to(dtype).contiguous(), y.to(dtype).contiguous()
-    valid = valid[:, None] if valid.ndim == 3 else valid
-    if depth is not None:
-        depth = depth.to(dtype)
-        valid = valid & torch.isfinite(depth)
-    tol = _edge_tolerance(dtype)
-    cells = _cells(x, y, valid, stretch, tol)
+    return src_x.view(shape).to(out_dtype), src_y.view(shape).to(out_dtype), hit.view(shape)
 
+
+_Hit = tuple[int, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _candidate_hits(cells: _Cells, w: int, tol: float) -> list[_Hit]:
+    """The target pixels inside used triangles: ``(k, cell, pixel, wb, wc)`` per batch of
+    hits, ``k`` 0 for the upper and 1 for the lower triangle, ``pixel`` the flat target
+    index, ``wb``, ``wc`` the barycentric coordinates (all but ``k`` (P,))."""
     # Candidate m of a box is its pixel (x0 + m % nx, y0 + m // nx). Most boxes hold one
     # pixel, so candidates 0 are tested on the whole grid without gathers, the others
-    # (boxes of 2 to a few pixels) gathered. Each hit: (triangle k, cell, pixel, wb, wc).
+    # (boxes of 2 to a few pixels) gathered.
     hits = []
     has = cells.size > 0
     dx0, dy0, edges = cells.grid()
@@ -269,6 +278,7 @@ def invert_map_2d(
     extra = cells.size[more] - 1
     total = int(extra.sum())
     if total:
+        device = more.device
         first = torch.cumsum(extra, 0) - extra
         i = torch.repeat_interleave(torch.arange(more.numel(), device=device), extra, output_size=total)
         c = more[i]
@@ -280,16 +290,24 @@ def invert_map_2d(
         for k, (wb, wc, inside) in enumerate(_barycentric(dx0 + ox, dy0 + oy, edges, tol)):
             j = inside.nonzero().squeeze(1)
             hits.append((k, c[j], cells.base[c[j]] + oy[j] * w + ox[j], wb[j], wc[j]))
+    return hits
 
-    # Source position (l, j) + wb (b - a) + wc (c - a) and z-buffer key of each hit.
+
+_Part = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _hit_positions(hits: list[_Hit], depth: torch.Tensor | None, h: int, w: int) -> list[_Part]:
+    """``(pixel, key, triangle id, src_x, src_y)`` of each batch of hits: the source
+    position ``(l, j) + wb (b - a) + wc (c - a)`` and the z-buffer key (the interpolated
+    depth, or the raster position ``src_y * W + src_x`` without depth)."""
     parts = []
     for k, c, pix, wb, wc in hits:
         rows = torch.div(c, w - 1, rounding_mode="floor")  # b t (H - 1) + j
         col = c - rows * (w - 1)
         frame = torch.div(rows, h - 1, rounding_mode="floor")
         line = rows - frame * (h - 1)
-        sx = col.to(dtype) + (wb + wc if k == 0 else wb)
-        sy = line.to(dtype) + (wc if k == 0 else wb + wc)
+        sx = col.to(wb.dtype) + (wb + wc if k == 0 else wb)
+        sy = line.to(wb.dtype) + (wc if k == 0 else wb + wc)
         if depth is None:
             key = sy * w + sx
         else:
@@ -300,12 +318,17 @@ def invert_map_2d(
             dc = d[a + w + 1] if k == 0 else d[a + w]
             key = da + wb * (db - da) + wc * (dc - da)
         parts.append((pix, key, 2 * c + k, sx, sy))
+    return parts
 
-    # z-buffer: the largest key per pixel; equal keys go to the largest triangle id.
-    best = torch.full((n,), -math.inf, dtype=dtype, device=device)
+
+def _zbuffer(parts: list[_Part], src_x: torch.Tensor, src_y: torch.Tensor, hit: torch.Tensor) -> None:
+    """Writes the winning hit of each target pixel into the flat (N,) ``src_x``, ``src_y``
+    and ``hit``: the largest key; equal keys go to the largest triangle id."""
+    n = src_x.numel()
+    best = torch.full((n,), -math.inf, dtype=src_x.dtype, device=src_x.device)
     for pix, key, _, _, _ in parts:
         best.scatter_reduce_(0, pix, key, reduce="amax")
-    last = torch.full((n,), -1, dtype=torch.long, device=device)
+    last = torch.full((n,), -1, dtype=torch.long, device=src_x.device)
     wins = []
     for pix, key, tid, _, _ in parts:
         win = (key >= best[pix]).nonzero().squeeze(1)
@@ -317,4 +340,3 @@ def invert_map_2d(
         src_x[where] = sx[chosen]
         src_y[where] = sy[chosen]
         hit[where] = True
-    return src_x.view(shape).to(out_dtype), src_y.view(shape).to(out_dtype), hit.view(shape)

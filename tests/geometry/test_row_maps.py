@@ -1,0 +1,165 @@
+"""Row-map inversion and hole filling against loops written as their docstrings say."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+import torch
+
+from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+
+from tests.helpers import rand
+
+
+def _invert_row_map_loop(
+    dst: torch.Tensor, valid: torch.Tensor, depth: torch.Tensor | None, max_stretch: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """invert_row_map written as the docstring says, one segment and one column at a time."""
+    b, t, h, w = dst.shape
+    out = torch.full_like(dst, math.nan)
+    best: dict[tuple[int, int, int, int], tuple[float, float]] = {}
+    for i in range(b):
+        for j in range(t):
+            for r in range(h):
+                f = dst[i, j, r].tolist()
+                v = (valid[i] if valid.ndim == 3 else valid[i, j])[r].tolist()
+                for k in range(w - 1):
+                    length = f[k + 1] - f[k]
+                    if not (v[k] and v[k + 1] and 0 < length <= max_stretch):
+                        continue
+                    for col in range(w):
+                        if not f[k] <= col <= f[k + 1]:
+                            continue
+                        frac = (col - f[k]) / length
+                        src = k + frac
+                        if depth is None:
+                            key = src
+                        else:
+                            d0, d1 = float(depth[i, j, r, k]), float(depth[i, j, r, k + 1])
+                            key = d0 + (d1 - d0) * frac
+                        best[i, j, r, col] = max(best.get((i, j, r, col), (-math.inf, -math.inf)), (key, src))
+    hit = torch.zeros(dst.shape, dtype=torch.bool)
+    for idx, (_, src) in best.items():
+        out[idx] = src
+        hit[idx] = True
+    return out, hit
+
+
+def _check_inverse(
+    dst: torch.Tensor, valid: torch.Tensor, depth: torch.Tensor | None, stretch: float
+) -> None:
+    src, hit = invert_row_map(dst, valid, depth, stretch)
+    ref_src, ref_hit = _invert_row_map_loop(dst, valid, depth, stretch)
+    assert torch.equal(hit, ref_hit)
+    assert bool(torch.isnan(src[~hit]).all())
+    torch.testing.assert_close(src[hit], ref_src[hit], atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("stretch", [math.inf, 1.5])
+def test_invert_row_map_monotone(stretch: float) -> None:
+    b, t, h, w = 2, 2, 3, 12
+    steps = 0.3 + 1.5 * rand(b, t, h, w, seed=7)  # increasing, some segments longer than 1.5
+    dst = steps.cumsum(-1) - 3.0  # starts left of the image, may end right of it
+    valid = rand(b, h, w, seed=8) > 0.15
+    _check_inverse(dst, valid, None, stretch)
+    _check_inverse(dst, rand(b, t, h, w, seed=15) > 0.15, None, stretch)  # a mask per angle
+    src, hit = invert_row_map(dst, torch.ones_like(valid), None)
+    # Where it hits, the inverse is a true inverse of the piecewise-linear forward map.
+    cols = torch.arange(w, dtype=torch.float64).expand_as(dst)
+    k = src.floor().clamp(max=w - 2).long()
+    frac = src - k
+    fwd = torch.where(
+        hit,
+        dst.gather(-1, k.clamp(min=0)) * (1 - frac) + dst.gather(-1, (k + 1).clamp(0, w - 1)) * frac,
+        cols,
+    )
+    torch.testing.assert_close(fwd[hit], cols[hit], atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("use_depth", [True, False])
+def test_invert_row_map_fold_picks_nearest(use_depth: bool) -> None:
+    """A map that folds back (x - 2.4 sin x): the reversed segments are dropped and where
+    the forward ones overlap, the largest depth (or, without depth, source x) wins."""
+    b, t, h, w = 1, 2, 4, 16
+    x = torch.arange(w, dtype=torch.float64)
+    phase = rand(b, t, h, 1, seed=9) * 6
+    dst = x + 2.4 * torch.sin(0.9 * x + phase)
+    depth = rand(b, t, h, w, seed=10) if use_depth else None
+    valid = torch.ones(b, h, w, dtype=torch.bool)
+    _check_inverse(dst, valid, depth, math.inf)
+    _check_inverse(dst, valid, depth, 2.0)
+    if use_depth:
+        # Raising a segment's depth above everything makes it win every column it covers.
+        k = 5
+        depth2 = depth.clone()
+        depth2[..., k : k + 2] = 10.0
+        src, _ = invert_row_map(dst, valid, depth2)
+        lo, hi = dst[..., k], dst[..., k + 1]
+        cols = x.expand_as(dst)
+        covered = (cols >= lo[..., None]) & (cols <= hi[..., None]) & (hi > lo)[..., None]
+        assert bool(covered.any())
+        assert bool(((src[covered] >= k) & (src[covered] <= k + 1)).all())
+
+
+def test_invert_row_map_max_stretch_is_inclusive() -> None:
+    dst = torch.tensor([0.0, 2.0, 4.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0], dtype=torch.float64).expand(
+        1, 1, 1, 9
+    )
+    src, hit = invert_row_map(dst, torch.ones(1, 1, 9, dtype=torch.bool), None, max_stretch=2.0)
+    # Segments of length 2 are surface, the 3 px jump from 4 to 7 is not.
+    assert hit[0, 0, 0].tolist() == [True, True, True, True, True, False, False, True, True]
+    torch.testing.assert_close(src[0, 0, 0, :5], torch.tensor([0.0, 0.5, 1.0, 1.5, 2.0], dtype=torch.float64))
+    torch.testing.assert_close(src[0, 0, 0, 7:], torch.tensor([3.0, 4.0], dtype=torch.float64))
+
+
+def test_invert_row_map_no_segment() -> None:
+    dst = torch.arange(6, dtype=torch.float64).flip(-1).expand(1, 1, 2, 6)  # all reversed
+    src, hit = invert_row_map(dst, torch.ones(1, 2, 6, dtype=torch.bool), None)
+    assert not bool(hit.any()) and bool(torch.isnan(src).all())
+    src, hit = invert_row_map(torch.zeros(1, 1, 2, 1), torch.ones(1, 2, 1, dtype=torch.bool), None)
+    assert src.shape == (1, 1, 2, 1) and not bool(hit.any())
+
+
+def _fill_row_holes_loop(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
+    out = src.clone()
+    w = src.shape[-1]
+    for idx in itertools.product(*map(range, src.shape[:-1])):
+        hits = [k for k in range(w) if hit[idx][k]]
+        for j in range(w):
+            if hit[idx][j]:
+                continue
+            prev = [k for k in hits if k < j]
+            nxt = [k for k in hits if k > j]
+            s, f = src[idx], fallback[idx]
+            if prev and nxt:
+                p, n = prev[-1], nxt[0]
+                out[idx][j] = s[p] + (s[n] - s[p]) * (j - p) / (n - p)
+            elif prev:
+                out[idx][j] = f[j] + s[prev[-1]] - f[prev[-1]]
+            elif nxt:
+                out[idx][j] = f[j] + s[nxt[0]] - f[nxt[0]]
+            else:
+                out[idx][j] = f[j]
+    return out
+
+
+def test_fill_row_holes() -> None:
+    shape = (2, 3, 4, 9)
+    hit = rand(*shape, seed=11) < 0.4
+    hit[0, 0, 0] = False  # an empty row
+    hit[0, 0, 1] = torch.tensor([False, False, True, False, False, True, False, False, False])
+    src = torch.where(hit, 10 * rand(*shape, seed=12), torch.full(shape, math.nan, dtype=torch.float64))
+    fallback = 3.0 * torch.arange(9, dtype=torch.float64) + rand(*shape, seed=13)
+    filled = fill_row_holes(src, hit, fallback)
+    assert bool(torch.isfinite(filled).all())  # the NaN of the non-hits never leaks
+    torch.testing.assert_close(filled, _fill_row_holes_loop(src, hit, fallback), atol=1e-12, rtol=0)
+    assert torch.equal(filled[hit], src[hit])
+    assert torch.equal(filled[0, 0, 0], fallback[0, 0, 0])
+    row, s, f = filled[0, 0, 1], src[0, 0, 1], fallback[0, 0, 1]
+    torch.testing.assert_close(
+        row[3:5], s[2] + (s[5] - s[2]) * torch.tensor([1 / 3, 2 / 3], dtype=torch.float64)
+    )
+    torch.testing.assert_close(row[6:], f[6:] + (s[5] - f[5]))  # beyond the last hit
+    torch.testing.assert_close(row[:2], f[:2] + (s[2] - f[2]))  # before the first hit

@@ -1,0 +1,184 @@
+"""What the view-warp modules share: seed views sampled with target→source maps and blended.
+
+Convention:
+    Images are (C, H, W) (batched (B, C, H, W)); x is the column, y the row; pixel
+    centres are at integer coordinates. A subclass builds :class:`~torch_eigview.warp.maps.WarpMaps`
+    (target → source, in pixels) from the correspondences of the two seed views; the seed
+    images are then sampled with :func:`kornia.geometry.transform.remap` (bilinear,
+    ``align_corners=True``: the tent weights of Eq. 4) and blended with the maps' weights.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from kornia.geometry.transform import remap
+
+from torch_eigview.check import as_angle_tensor, check_alpha, check_float_tensor, check_ndim, check_number
+from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.warp.maps import WarpMaps, _renormalize
+
+__all__ = ["BLENDS", "ViewWarp"]
+
+#: How two seed views that both see a target pixel share it (a view warp's ``blend``).
+BLENDS = ("linear", "nearest")
+
+
+class ViewWarp(torch.nn.Module):
+    """Synthesizes novel views from one or two seed views at angles 0 and ``alpha``.
+
+    A subclass implements :meth:`maps` for its camera model; sampling, blending and
+    :meth:`forward` are the same for every camera.
+
+    Args:
+        alpha: angle of the second seed view in degrees.
+        max_stretch: a forward-mapped segment or triangle edge longer than this (pixels)
+            is a depth jump, not a surface: it is left to the other view.
+        blend: how two seed views that both see a target pixel share it: ``"linear"``
+            (weights 1 − θ/α and θ/α, a cross-dissolve) or ``"nearest"`` (the seed nearer
+            in angle alone, seed 1 up to α/2).
+    """
+
+    def __init__(self, alpha: float, *, max_stretch: float = 3.0, blend: str = "linear") -> None:
+        super().__init__()
+        self.alpha = check_alpha(alpha)
+        if blend not in BLENDS:
+            raise ValueError(f"blend must be one of {BLENDS}, got {blend!r}")
+        self.blend = blend
+        self.max_stretch = check_number(max_stretch, "max_stretch")
+        if not self.max_stretch > 0:
+            raise ValueError(f"max_stretch={max_stretch} must be positive")
+
+    def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
+        """Target→source maps and blend weights for the novel angles ``thetas``.
+
+        Args:
+            correspondence: (B, H, W) correspondences between the seed views.
+            thetas: (T,) novel angles in degrees from the first seed view, in (−90, 90).
+            n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
+
+        Returns:
+            :class:`~torch_eigview.warp.maps.WarpMaps` with S = ``n_sources``.
+        """
+        raise NotImplementedError(f"{type(self).__name__} must implement maps()")
+
+    @staticmethod
+    def _check_n_sources(n_sources: int) -> None:
+        if n_sources not in (1, 2):
+            raise ValueError(f"n_sources must be 1 or 2, got {n_sources}")
+
+    @staticmethod
+    def _novel_angles(thetas: object) -> torch.Tensor:
+        """(T,) float64 degrees, each within a quarter turn of the first seed view."""
+        theta = as_angle_tensor(thetas, "thetas")
+        if bool((theta.abs() >= 90).any()):
+            raise ValueError(
+                f"thetas must lie within (-90, 90) degrees of the first seed view, got {theta.tolist()}: "
+                "beyond that the seed views show the object's other side"
+            )
+        return theta
+
+    def _share_of_second(self, theta_rad: torch.Tensor) -> torch.Tensor:
+        """The second seed's weight where both seeds see a pixel (``blend``), per angle."""
+        lam2 = (theta_rad / math.radians(self.alpha)).clamp(0, 1)
+        return lam2 if self.blend == "linear" else (lam2 > 0.5).to(lam2.dtype)
+
+    @staticmethod
+    def apply_maps(maps: WarpMaps, views: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
+        """Samples and blends the seed views with precomputed maps.
+
+        Args:
+            maps: :class:`~torch_eigview.warp.maps.WarpMaps` with S sources for B objects and T angles.
+            views: (S, B, C, H, W) seed images.
+            masks: optional (S, B, H, W) foreground masks of the seed views (non-zero is
+                foreground, any dtype):
+                *silhouette-aware* sampling. Each target pixel's bilinear taps, over both
+                seeds and with the blend weights, then count foreground source pixels
+                only and are renormalized to sum to 1; a target pixel whose foreground
+                share is below 1/2 is background (0). Without it a pixel on the
+                silhouette mixes object and background (a dark rim); with it the result
+                is still linear in ``views`` for fixed masks (the weights of
+                :meth:`SparseViewOperator.from_maps` with ``masks``; the two round the
+                foreground share differently, so a pixel within float rounding of 1/2
+                can fall on different sides of it).
+
+        Returns:
+            (B, T, C, H, W) synthesized views.
+        """
+        s, b, t, h, w = maps.src_x.shape
+        c = views.shape[2]
+        if masks is not None:
+            if masks.shape != (s, b, h, w):
+                raise ValueError(
+                    f"masks must have shape (S, B, H, W) = {(s, b, h, w)}, got {tuple(masks.shape)}"
+                )
+            m = (masks.to(views.device) != 0).to(views.dtype)[:, :, None]
+            views = torch.cat([views * m, m], dim=2)  # the mask rides along: one warp for both
+        rows = torch.arange(h, dtype=views.dtype, device=views.device).view(1, h, 1).expand(b * t, h, w)
+        ch = views.shape[2]
+        out = views.new_zeros(b, t, ch, h, w)
+        for i in range(s):
+            img = views[i][:, None].expand(b, t, ch, h, w).reshape(b * t, ch, h, w)
+            map_x = maps.src_x[i].reshape(b * t, h, w).to(views.dtype)
+            map_y = rows if maps.src_y is None else maps.src_y[i].reshape(b * t, h, w).to(views.dtype)
+            warped = remap(img, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
+            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped.view(b, t, ch, h, w)
+        if masks is None:
+            return out
+        return _renormalize(out[:, :, :c], out[:, :, c:])
+
+    def forward(
+        self,
+        view1: torch.Tensor,
+        view2: torch.Tensor | None = None,
+        *,
+        correspondence: Correspondence,
+        thetas: object,
+        masks: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Synthesizes the novel views.
+
+        Args:
+            view1: (B, C, H, W) or (C, H, W) first seed view (angle 0).
+            view2: same shape, second seed view (angle ``alpha``), or None to warp view 1 alone.
+            correspondence: (B, H, W) correspondences between the seed views.
+            thetas: (T,) novel angles in degrees.
+            masks: optional foreground masks of the seed views, (S, B, H, W) (or (S, H, W)
+                unbatched; S = 1 or 2 as views are given): silhouette-aware sampling, see
+                :meth:`apply_maps`.
+
+        Returns:
+            (B, T, C, H, W) views (or (T, C, H, W) for unbatched input); differentiable
+            with respect to ``view1`` and ``view2``.
+        """
+        v1 = check_float_tensor(view1, "view1")
+        check_ndim(v1, "view1", (3, 4), "(B, C, H, W) or (C, H, W)")
+        unbatched = v1.ndim == 3
+        views = [v1[None] if unbatched else v1]
+        if view2 is not None:
+            v2 = check_float_tensor(view2, "view2")
+            if v2.shape != v1.shape:
+                raise ValueError(
+                    f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}"
+                )
+            if v2.dtype != v1.dtype:
+                raise TypeError(f"view2 must have the dtype of view1 ({v1.dtype}), got {v2.dtype}")
+            views.append(v2[None] if unbatched else v2)
+        b, _, h, w = views[0].shape
+        if correspondence.shape != (b, h, w):
+            raise ValueError(
+                f"correspondence must have shape (B, H, W) = {(b, h, w)} to match the views, "
+                f"got {correspondence.shape}"
+            )
+        if masks is not None:
+            if not isinstance(masks, torch.Tensor):
+                raise TypeError(f"masks must be a tensor, got {type(masks).__name__}")
+            expected = (len(views), h, w) if unbatched else (len(views), b, h, w)
+            if masks.shape != expected:
+                raise ValueError(f"masks must have shape {expected} (S, [B,] H, W), got {tuple(masks.shape)}")
+            masks = (masks[:, None] if unbatched else masks).to(v1.device)
+        corr = correspondence.to(device=v1.device)
+        maps = self.maps(corr, thetas, n_sources=len(views))
+        out = self.apply_maps(maps, torch.stack(views), masks)
+        return out[0] if unbatched else out

@@ -1,0 +1,204 @@
+"""Target→source maps of the view warps: Eq. 2's maps, their 2D refinement, the sampler.
+
+Convention:
+    Images are (C, H, W) (batched (B, C, H, W)); x is the column, y the row; pixel
+    centres are at integer coordinates. Rows never mix (the camera rotates about the
+    vertical axis), so every map here is a map along rows: ``dst_x_for_src`` (forward,
+    Eq. 2) gives the target column of each source pixel, ``src_x_for_dst`` (inverse) the
+    source column sampled by each target pixel. Maps are in pixels, not normalized, and
+    are handed to :func:`kornia.geometry.transform.remap` with ``align_corners=True``.
+
+The maps depend only on the correspondences, so the synthesized view is linear in the
+seed images: :class:`~torch_eigview.warp.base.ViewWarp` samples the seeds with them and
+:mod:`torch_eigview.warp.operator` builds the same linear map as the sparse product G·C.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+
+__all__ = ["RowGeometry", "WarpMaps"]
+
+
+@dataclass(frozen=True)
+class WarpMaps:
+    """Target→source maps and blend weights for T novel views of B objects.
+
+    Attributes:
+        src_x: (S, B, T, H, W) source column in seed view s for each target pixel.
+        weight: (S, B, T, H, W) blend weight of seed view s (they sum to 1 per pixel).
+        hit: (S, B, T, H, W) bool, True where seed view s sees the target pixel.
+        thetas: (T,) novel angles in degrees.
+        src_y: (S, B, T, H, W) source row, or None when every target pixel samples its
+            own row (the camera axis is perpendicular to the rotation axis: a pure row warp).
+    """
+
+    src_x: torch.Tensor
+    weight: torch.Tensor
+    hit: torch.Tensor
+    thetas: torch.Tensor
+    src_y: torch.Tensor | None = None
+
+    @property
+    def n_sources(self) -> int:
+        return self.src_x.shape[0]
+
+
+def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
+    """Bilinear sampler of ``fields`` (B, T, F, H, W) at pixel coordinates (B, T, H, W).
+
+    These are maps, not images: sampled with ``grid_sample`` directly (border padding,
+    ``align_corners=True``, the convention kornia's ``remap`` uses for pixel maps), the
+    first ``n_fields`` of the F fields (default all) in one call.
+    """
+    b, t, f, h, w = fields.shape
+    flat = fields.reshape(b * t, f, h, w)
+    sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
+    grid = fields.new_empty(b, t, h, w, 2)  # written in place on every call
+
+    def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
+        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad or flat.requires_grad):
+            # out= does not differentiate, and grid_sample keeps its grid for the backward
+            # pass, so a differentiated call gets a grid of its own.
+            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)
+        else:
+            torch.mul(x, sx, out=grid[..., 0]).sub_(1)
+            torch.mul(y, sy, out=grid[..., 1]).sub_(1)
+            g = grid
+        src = flat if n_fields == f else flat[:, :n_fields]
+        out = F.grid_sample(
+            src, g.view(b * t, h, w, 2), mode="bilinear", padding_mode="border", align_corners=True
+        )
+        return out.view(b, t, n_fields, h, w)
+
+    return sample
+
+
+def _renormalize(weighted: torch.Tensor, share: torch.Tensor) -> torch.Tensor:
+    """Silhouette-aware sampling's last step: ``weighted`` (foreground taps only) divided by
+    the foreground ``share`` of the taps, 0 where that share is below 1/2 (background)."""
+    return torch.where(share >= 0.5, weighted / share.clamp_min(0.5), 0.0)
+
+
+def _refine_2d(
+    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 4
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Inverts the 2D forward map p -> p + (dx, dy)(p) by fixed-point iteration.
+
+    Starts from the row-wise inverse ``src_x``; a target pixel is a hit when the iteration
+    lands on a valid source pixel that maps back to within half a pixel.
+    """
+    b, t, h, w = dx.shape
+    xx = torch.arange(w, dtype=dx.dtype, device=dx.device).expand(b, t, h, w)
+    yy = torch.arange(h, dtype=dx.dtype, device=dx.device).view(h, 1).expand(b, t, h, w)
+    valid_t = (valid[:, None] if valid.ndim == 3 else valid).to(dx.dtype).expand(b, t, h, w)
+    sample = _sampler(torch.stack([dx, dy, valid_t], dim=2))
+    sx, sy = src_x, yy - dy
+    for _ in range(iters):
+        d = sample(sx, sy, 2)  # the displacement only; validity once, at the end
+        sx, sy = xx - d[:, :, 0], yy - d[:, :, 1]
+    d = sample(sx, sy)
+    residual = (sx + d[:, :, 0] - xx).abs() + (sy + d[:, :, 1] - yy).abs()
+    inside = (sx >= 0) & (sx <= w - 1) & (sy >= 0) & (sy <= h - 1)
+    return sx, sy, (d[:, :, 2] > 0.999) & inside & (residual < 0.5)
+
+
+@dataclass(frozen=True)
+class RowGeometry:
+    """Eq. 2 / Eq. 7 for one batch of novel angles, shared by both seed views.
+
+    The tilted orthographic camera: a point (X, Y, Z), X from the rotation axis, is seen
+    at ``x - c = X cos(phi) + Z sin(phi)`` and ``y = K(Y) - tilt * (Z cos(phi) - X sin(phi))``
+    with ``tilt = sin(elevation)``; tilt 0 is the paper's orthographic camera, for which
+    rows do not move. x follows Eq. 2 whatever the tilt.
+
+    Attributes:
+        a: (1, T, 1, 1) Eq. 2's coefficient of the first seed view, per novel angle.
+        b: (1, T, 1, 1) the coefficient of the second seed view.
+        theta: (1, T, 1, 1) novel angles in radians.
+        c: column of the rotation axis.
+        alpha: angle of the second seed view in radians.
+        sign: (B, 1, 1, 1) +1 or -1, the way depth points towards the camera.
+        max_stretch: longest forward-map segment (pixels) still taken as one surface.
+        tilt: sine of the camera's elevation.
+    """
+
+    a: torch.Tensor
+    b: torch.Tensor
+    theta: torch.Tensor
+    c: float
+    alpha: float
+    sign: torch.Tensor
+    max_stretch: float
+    tilt: float
+
+    def source_maps(
+        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, second: bool
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
+        in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
+        c, al, th = self.c, self.alpha, self.theta
+        big_x = (x1 - c)[:, None]
+        big_z = ((x2 - c)[:, None] - big_x * math.cos(al)) / math.sin(al)
+        dst_x_for_src = c + self.a * (x1 - c)[:, None] + self.b * (x2 - c)[:, None]
+        depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
+        # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
+        other = self.a if second else self.b
+        valid = valid[:, None] | (other == 0)
+        src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch)
+        # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
+        scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
+        cols = torch.arange(x1.shape[-1], dtype=x1.dtype, device=x1.device)
+        src_x = fill_row_holes(src_x, hit, (c + (cols - c) * scale).expand_as(src_x))
+        if self.tilt == 0.0:
+            return src_x, None, hit
+        phi = al if second else 0.0
+        dy = -self.tilt * (big_z * (torch.cos(th) - math.cos(phi)) - big_x * (torch.sin(th) - math.sin(phi)))
+        grid = x2 if second else x1
+        return _refine_2d(src_x, dst_x_for_src - grid[:, None], dy, valid)
+
+    def maps(
+        self,
+        correspondence: Correspondence,
+        thetas: torch.Tensor,
+        share_of_second: torch.Tensor,
+        n_sources: int,
+    ) -> WarpMaps:
+        """Both seed views' maps (or view 1's alone) and their blend weights.
+
+        Args:
+            correspondence: (B, H, W) correspondences between the seed views.
+            thetas: (T,) novel angles in degrees, stored in the result.
+            share_of_second: (1, T, 1, 1) the second seed's weight where both see a pixel.
+            n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
+
+        Returns:
+            :class:`WarpMaps` with S = ``n_sources``; ``src_y`` is None unless ``tilt`` is set.
+        """
+        d12 = correspondence.disparity_12
+        cols = torch.arange(d12.shape[-1], dtype=d12.dtype, device=d12.device).expand_as(d12)
+        # Source view 1: x1 is the pixel grid, x2 its match. Source view 2: the other way.
+        src1, srcy1, hit1 = self.source_maps(cols, cols + d12, correspondence.valid_12, second=False)
+        if n_sources == 1:
+            sy = None if srcy1 is None else srcy1[None]
+            return WarpMaps(src1[None], torch.ones_like(src1)[None], hit1[None], thetas, sy)
+        src2, srcy2, hit2 = self.source_maps(
+            cols + correspondence.disparity_21, cols, correspondence.valid_21, second=True
+        )
+        # Where both views see a pixel the nearer one in angle weighs more; where one is
+        # occluded the other is used alone; where neither sees it, the angular weights.
+        both, neither = hit1 & hit2, ~hit1 & ~hit2
+        w1 = torch.where(both | neither, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype))
+        src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
+        return WarpMaps(
+            torch.stack([src1, src2]), torch.stack([w1, 1 - w1]), torch.stack([hit1, hit2]), thetas, src_y
+        )
