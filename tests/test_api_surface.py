@@ -15,6 +15,7 @@ PUBLIC = [
     "Correspondence",
     "EigenProjection",
     "Eigenspace",
+    "FewViewEigenspace",
     "KernelEigenspace",
     "KernelProjection",
     "NearestNeighborRecognizer",
@@ -36,6 +37,11 @@ PUBLIC = [
 
 # Each subpackage's public names (its __all__).
 SUBPACKAGES = {
+    "method": [
+        "ALL_COMPONENTS",
+        "FewViewEigenspace",
+        "resolve_components",
+    ],
     "geometry": [
         "AffineCoefficients",
         "Correspondence",

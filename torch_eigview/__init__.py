@@ -12,9 +12,10 @@ The top level holds the core names; everything else is imported from its subpack
 
 from __future__ import annotations
 
-import importlib
 from importlib.metadata import PackageNotFoundError, version
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from torch_eigview.lazy import attach
 
 if TYPE_CHECKING:
     from torch_eigview.datasets.coil import CoilFolder
@@ -25,6 +26,7 @@ if TYPE_CHECKING:
     from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
     from torch_eigview.geometry.pose import affine_coefficients, estimate_elevation, orthographic_coefficients
     from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
+    from torch_eigview.method.estimator import FewViewEigenspace
     from torch_eigview.nn.kernel_projection import KernelProjection
     from torch_eigview.nn.projection import EigenProjection
     from torch_eigview.nn.recognition import NearestNeighborRecognizer
@@ -43,6 +45,7 @@ _SOURCES = {
     "CoilFolder": "datasets.coil",
     "Correspondence": "geometry.correspondence",
     "EigenProjection": "nn.projection",
+    "FewViewEigenspace": "method.estimator",
     "Eigenspace": "decomposition.eigenspace",
     "KernelEigenspace": "decomposition.kernel",
     "KernelProjection": "nn.kernel_projection",
@@ -68,6 +71,7 @@ __all__ = [
     "Correspondence",
     "EigenProjection",
     "Eigenspace",
+    "FewViewEigenspace",
     "KernelEigenspace",
     "KernelProjection",
     "NearestNeighborRecognizer",
@@ -88,15 +92,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """Imports a public name's submodule on first use (PEP 562) and caches the name."""
-    source = _SOURCES.get(name)
-    if source is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = attach(__name__, _SOURCES, __all__)

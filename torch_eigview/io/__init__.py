@@ -6,8 +6,9 @@ Names are imported lazily (PEP 562): ``torch_eigview.io.images`` and
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from torch_eigview.lazy import attach
 
 if TYPE_CHECKING:
     from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
@@ -46,15 +47,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """Imports a public name's submodule on first use (PEP 562) and caches the name."""
-    source = _SOURCES.get(name)
-    if source is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = attach(__name__, _SOURCES, __all__)

@@ -1,0 +1,45 @@
+"""Lazy public names (PEP 562) for packages whose submodules import torch.
+
+``import torch_eigview`` and ``import torch_eigview.io`` import nothing heavy: a name is
+imported from its submodule on first use and cached in the package's namespace. This
+module imports no torch, so the torch-free parts (``eigview predict``) stay light.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+__all__ = ["attach"]
+
+
+def attach(
+    package: str, sources: Mapping[str, str], public: Sequence[str]
+) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """The ``__getattr__`` and ``__dir__`` of a package with lazily imported names.
+
+    Args:
+        package: the package's ``__name__``.
+        sources: public name -> the submodule (relative to ``package``) that defines it.
+        public: the package's ``__all__``.
+
+    Example:
+        >>> getattr_, dir_ = attach("json", {"JSONDecoder": "decoder"}, ["JSONDecoder"])
+        >>> getattr_("JSONDecoder").__name__
+        'JSONDecoder'
+    """
+
+    def __getattr__(name: str) -> Any:
+        source = sources.get(name)
+        if source is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(f"{package}.{source}"), name)
+        setattr(sys.modules[package], name, value)
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(vars(sys.modules[package])) | set(public))
+
+    return __getattr__, __dir__
