@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -270,3 +271,108 @@ def test_estimate_errors() -> None:
         ValueError, match=r"view1 must have shape \(C, H, W\) or \(B, C, H, W\), got shape \(8, 9\)"
     ):
         estimate_correspondence(view[0], view[0])
+
+
+# --- indexing and collation -------------------------------------------------------------
+
+
+def _batch(b: int = 4, vertical: bool = True) -> Correspondence:
+    corr = correspondence_from_disparity(_smooth_disparity(b, 3, 8, seed=5))
+    if not vertical:
+        return corr
+    return dataclasses.replace(corr, vertical_12=torch.rand(b, 3, 8), vertical_21=torch.rand(b, 3, 8))
+
+
+def _assert_same_fields(a: Correspondence, b: Correspondence) -> None:
+    for f in dataclasses.fields(Correspondence):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        assert (x is None) == (y is None), f.name
+        if x is not None:
+            assert torch.equal(x, y), f.name
+
+
+@pytest.mark.parametrize(
+    ("index", "rows"),
+    [
+        (2, [2]),
+        (-1, [3]),
+        (slice(1, 3), [1, 2]),
+        ([3, 0, 0], [3, 0, 0]),
+        (torch.tensor([2, 1]), [2, 1]),
+        (torch.tensor([True, False, False, True]), [0, 3]),
+        ([], []),
+    ],
+)
+def test_indexing_selects_view_pairs(index: object, rows: list[int]) -> None:
+    corr = _batch()
+    part = corr[index]
+    assert part.shape == (len(rows), 3, 8)
+    for f in dataclasses.fields(Correspondence):
+        assert torch.equal(getattr(part, f.name), getattr(corr, f.name)[rows]), f.name
+    assert corr[1:2].vertical_12 is not None and _batch(vertical=False)[1].vertical_12 is None
+
+
+def test_len_iteration_and_collate_invert_indexing() -> None:
+    corr = _batch()
+    assert len(corr) == 4 and len(corr[:0]) == 0
+    items = list(corr)  # __getitem__ with an IndexError at the end: one B = 1 pair each
+    assert [item.shape for item in items] == [(1, 3, 8)] * 4
+    _assert_same_fields(Correspondence.collate(items), corr)
+    _assert_same_fields(Correspondence.collate([corr[:1], corr[1:]]), corr)
+
+
+def test_default_collate_and_data_loader_batch_correspondences() -> None:
+    corr = _batch(vertical=False)
+    views = torch.rand(4, 1, 3, 8)
+    samples = [{"view": views[i], "corr": corr[i]} for i in range(4)]
+    batch = torch.utils.data.default_collate(samples)
+    assert batch["view"].shape == (4, 1, 3, 8)
+    _assert_same_fields(batch["corr"], corr)
+    loader = torch.utils.data.DataLoader(list(zip(views, corr, strict=True)), batch_size=3)
+    (v0, c0), (v1, c1) = list(loader)
+    assert torch.equal(v0, views[:3]) and torch.equal(v1, views[3:])
+    assert c0.shape == (3, 3, 8) and c1.shape == (1, 3, 8)
+    _assert_same_fields(Correspondence.collate([c0, c1]), corr)
+
+
+@pytest.mark.parametrize(
+    ("index", "error", "match"),
+    [
+        (4, IndexError, r"index 4 is out of range for a correspondence of B = 4"),
+        (-5, IndexError, "out of range"),
+        (
+            torch.tensor([True, False]),
+            IndexError,
+            r"boolean index must have shape \(B,\) = \(4,\), got \(2,\)",
+        ),
+        (torch.tensor([0.5]), IndexError, r"\(B,\) bool or \(K,\) integer, got torch.float32"),
+        (torch.zeros(2, 2, dtype=torch.long), IndexError, r"of shape \(2, 2\)"),
+        (1.0, TypeError, "index must be an int, a slice, a sequence of ints or a tensor, got float"),
+        (True, TypeError, "got bool"),
+        ("0", TypeError, "got str"),
+    ],
+)
+def test_indexing_errors(index: object, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        _batch()[index]
+
+
+def test_collate_errors() -> None:
+    corr = _batch()
+    with pytest.raises(ValueError, match="non-empty sequence of Correspondence"):
+        Correspondence.collate([])
+    with pytest.raises(ValueError, match="non-empty sequence of Correspondence"):
+        Correspondence.collate(corr)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"items\[1\] must be a Correspondence, got Tensor"):
+        Correspondence.collate([corr, corr.disparity_12])  # type: ignore[list-item]
+    small = correspondence_from_disparity(torch.zeros(1, 3, 5))
+    with pytest.raises(ValueError, match=r"items\[1\] has \(H, W\) = \(3, 5\), items\[0\] has \(3, 8\)"):
+        Correspondence.collate([corr, small])
+    with pytest.raises(ValueError, match=r"items\[1\].vertical_12 is None but items\[0\].vertical_12 is set"):
+        Correspondence.collate([corr[0], _batch(vertical=False)[0]])
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="pinned memory needs CUDA")
+def test_pin_memory() -> None:
+    pinned = _batch().pin_memory()
+    assert pinned.disparity_12.is_pinned() and pinned.valid_12.is_pinned()

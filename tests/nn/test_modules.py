@@ -30,6 +30,7 @@ from torch_eigview import (
 from torch_eigview.datasets import PerspectiveCamera, exact_correspondence_2d, make_object, render
 from torch_eigview.geometry import Correspondence, correspondence_from_disparity
 from torch_eigview.io.onnx import ExportedRecognizer, FoldedProjection
+from torch_eigview.warp import RandomTurntableRotation
 
 from tests.helpers import check_module, rand
 
@@ -154,6 +155,21 @@ def perspective_warp(dtype: torch.dtype) -> Case:
     )
 
 
+def random_turntable_rotation(dtype: torch.dtype) -> Case:
+    """Replayed parameters (B different angles, one sample not turned), so that the batched
+    call and the per-sample calls see the same draws."""
+    b, c, h, w = 3, 2, 6, 9
+    corr = correspondence_from_disparity((3.0 * rand(b, h, w, seed=25) - 1.5).to(dtype))
+    params = {"degrees": torch.tensor([-6.0, 8.0, 15.0]), "batch_prob": torch.tensor([True, False, True])}
+    return Case(
+        RandomTurntableRotation(20.0, 12.0, elevation=25.0),
+        (rand(b, c, h, w, seed=23, dtype=dtype), rand(b, c, h, w, seed=24, dtype=dtype)),
+        dict(correspondence=corr, params=params),
+        batched_kwargs=("correspondence", "params"),
+        export=False,
+    )
+
+
 BOTH = (torch.float32, torch.float64)
 
 # name -> (class, case factory, dtypes, slow); a class may have several cases. The warps run
@@ -170,6 +186,7 @@ CASES: dict[
     "ExportedRecognizer": (ExportedRecognizer, exported_recognizer, BOTH, False),
     "NovelViewWarp": (NovelViewWarp, novel_view_warp, (torch.float32,), True),
     "PerspectiveWarp": (PerspectiveWarp, perspective_warp, (torch.float32,), True),
+    "RandomTurntableRotation": (RandomTurntableRotation, random_turntable_rotation, (torch.float32,), True),
 }
 
 

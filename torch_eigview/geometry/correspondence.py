@@ -13,11 +13,14 @@ z-buffer and two-view blend handle the rest.
 from __future__ import annotations
 
 import dataclasses
+import numbers
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 from skimage.registration import optical_flow_ilk, optical_flow_tvl1
+from torch.utils.data._utils.collate import default_collate_fn_map
 
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
@@ -56,18 +59,133 @@ class Correspondence:
         b, h, w = self.disparity_12.shape
         return b, h, w
 
+    def __len__(self) -> int:
+        """B, the number of view pairs (a ``Dataset`` or ``Sampler`` sizes itself by it)."""
+        return self.disparity_12.shape[0]
+
+    def _map(self, fn: Callable[[torch.Tensor], torch.Tensor]) -> Correspondence:
+        """The correspondence with ``fn`` applied to every tensor (None stays None)."""
+        return Correspondence(
+            *(None if t is None else fn(t) for t in (getattr(self, f.name) for f in dataclasses.fields(self)))
+        )
+
     def to(
         self, device: torch.device | str | None = None, dtype: torch.dtype | None = None
     ) -> Correspondence:
         """Moves the disparities (and masks) to ``device``; ``dtype`` applies to disparities only."""
-        return Correspondence(
-            self.disparity_12.to(device=device, dtype=dtype),
-            self.disparity_21.to(device=device, dtype=dtype),
-            self.valid_12.to(device=device),
-            self.valid_21.to(device=device),
-            None if self.vertical_12 is None else self.vertical_12.to(device=device, dtype=dtype),
-            None if self.vertical_21 is None else self.vertical_21.to(device=device, dtype=dtype),
+        return self._map(
+            lambda t: t.to(device=device) if t.dtype == torch.bool else t.to(device=device, dtype=dtype)
         )
+
+    def pin_memory(self) -> Correspondence:
+        """The correspondence in page-locked memory (``DataLoader(pin_memory=True)`` calls it)."""
+        return self._map(torch.Tensor.pin_memory)
+
+    def __getitem__(self, index: int | slice | Sequence[int] | torch.Tensor) -> Correspondence:
+        """The view pairs selected by ``index`` along B, as a correspondence.
+
+        An integer keeps the batch dimension (``corr[i]`` has B = 1, like ``corr[i:i + 1]``):
+        a correspondence is always (B, H, W), and :meth:`collate` concatenates such items
+        back into a batch.
+
+        Args:
+            index: an int, a slice, a sequence of ints, a (B,) bool tensor or a (K,)
+                integer tensor.
+
+        Returns:
+            A :class:`Correspondence` of shape (K, H, W) sharing storage where torch's
+            indexing does (ints and slices).
+
+        Example:
+            >>> corr = correspondence_from_disparity(torch.zeros(4, 2, 3))
+            >>> corr[1].shape, corr[1:3].shape, corr[torch.tensor([True, False, True, True])].shape
+            ((1, 2, 3), (2, 2, 3), (3, 2, 3))
+        """
+        selector = _batch_selector(index, len(self))
+        return self._map(
+            lambda t: t[selector.to(t.device) if isinstance(selector, torch.Tensor) else selector]
+        )
+
+    @classmethod
+    def collate(cls, items: Sequence[Correspondence]) -> Correspondence:
+        """Concatenates correspondences along B: the inverse of indexing.
+
+        Registered with :func:`torch.utils.data.default_collate`, so a ``DataLoader`` over
+        samples that hold ``corr[i]`` batches them without a custom ``collate_fn``.
+
+        Args:
+            items: correspondences of shapes (B_i, H, W), all of one H, W, dtype and device,
+                either all with the vertical flows or all without.
+
+        Returns:
+            A :class:`Correspondence` of shape (sum B_i, H, W).
+
+        Example:
+            >>> corr = correspondence_from_disparity(torch.zeros(3, 2, 4))
+            >>> Correspondence.collate([corr[2], corr[0]]).shape
+            (2, 2, 4)
+        """
+        if isinstance(items, Correspondence) or not isinstance(items, Sequence) or not items:
+            raise ValueError(f"items must be a non-empty sequence of Correspondence, got {items!r:.80}")
+        for i, item in enumerate(items):
+            if not isinstance(item, Correspondence):
+                raise TypeError(f"items[{i}] must be a Correspondence, got {type(item).__name__}")
+            if item.shape[1:] != items[0].shape[1:]:
+                raise ValueError(
+                    f"items[{i}] has (H, W) = {item.shape[1:]}, items[0] has {items[0].shape[1:]}: "
+                    "all correspondences of a batch must have one image size"
+                )
+        fields = {}
+        for f in dataclasses.fields(cls):
+            values = [getattr(item, f.name) for item in items]
+            present = [v is not None for v in values]
+            if any(present) and not all(present):
+                i = present.index(not present[0])
+                given, missing = ("set", "None") if present[0] else ("None", "set")
+                raise ValueError(
+                    f"items[{i}].{f.name} is {missing} but items[0].{f.name} is {given}: "
+                    f"{f.name} must be given for all items or for none"
+                )
+            fields[f.name] = torch.cat(values) if all(present) else None
+        return cls(**fields)
+
+
+def _batch_selector(index: object, b: int) -> slice | torch.Tensor:
+    """``index`` of :meth:`Correspondence.__getitem__` as a slice or a 1-D index tensor."""
+    if isinstance(index, (bool, str, bytes)) or not isinstance(
+        index, (numbers.Integral, slice, Sequence, torch.Tensor)
+    ):
+        raise TypeError(
+            f"index must be an int, a slice, a sequence of ints or a tensor, got {type(index).__name__}"
+        )
+    if isinstance(index, numbers.Integral):
+        if not -b <= int(index) < b:
+            raise IndexError(f"index {index} is out of range for a correspondence of B = {b}")
+        start = int(index) % b
+        return slice(start, start + 1)
+    if isinstance(index, slice):
+        return index
+    selector = index if isinstance(index, torch.Tensor) else torch.as_tensor(index, dtype=torch.long)
+    if selector.dtype == torch.bool:
+        if selector.shape != (b,):
+            raise IndexError(f"a boolean index must have shape (B,) = ({b},), got {tuple(selector.shape)}")
+    elif selector.is_floating_point() or selector.is_complex() or selector.ndim != 1:
+        raise IndexError(
+            f"a tensor index must be (B,) bool or (K,) integer, got {selector.dtype} of shape {tuple(selector.shape)}"
+        )
+    return selector
+
+
+def _collate_correspondences(
+    batch: Sequence[Correspondence], *, collate_fn_map: dict[type, Callable[..., object]] | None = None
+) -> Correspondence:
+    """:func:`torch.utils.data.default_collate`'s hook for :class:`Correspondence` items."""
+    return Correspondence.collate(batch)
+
+
+# torch.utils.data.default_collate dispatches on the element type through this map; its
+# documentation names extending it in place as the way to teach it a custom type.
+default_collate_fn_map[Correspondence] = _collate_correspondences
 
 
 def _sample_rows(values: torch.Tensor, x: torch.Tensor) -> torch.Tensor:

@@ -1,9 +1,11 @@
 """Warping: target→source maps, the view-warp modules (orthographic/affine and
-perspective), size normalization and the sparse G·C operator (Eqs. 3–6).
+perspective), the random turntable rotation augmentation, size normalization and the
+sparse G·C operator (Eqs. 3–6).
 """
 
 from __future__ import annotations
 
+from torch_eigview.warp.augmentation import RandomTurntableRotation
 from torch_eigview.warp.base import BLENDS
 from torch_eigview.warp.maps import WarpMaps
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent
@@ -16,6 +18,7 @@ __all__ = [
     "BLENDS",
     "NovelViewWarp",
     "PerspectiveWarp",
+    "RandomTurntableRotation",
     "SparseViewOperator",
     "WarpMaps",
     "foreground_mask",

@@ -69,9 +69,24 @@ class ViewWarp(torch.nn.Module):
             raise ValueError(f"n_sources must be 1 or 2, got {n_sources}")
 
     @staticmethod
-    def _novel_angles(thetas: object) -> torch.Tensor:
-        """(T,) float64 degrees, each within a quarter turn of the first seed view."""
-        theta = as_angle_tensor(thetas, "thetas")
+    def _novel_angles(thetas: object, batch: int | None = None) -> torch.Tensor:
+        """(T,) float64 degrees, each within a quarter turn of the first seed view.
+
+        With ``batch`` (the number of objects B), a 2-D tensor is taken as (B, T): T angles
+        of each object's own (returned as (B, T); B may be 0).
+        """
+        if batch is not None and isinstance(thetas, torch.Tensor) and thetas.ndim == 2:
+            if thetas.shape[0] != batch or thetas.shape[1] == 0:
+                raise ValueError(
+                    f"thetas of shape (B, T) must have B = {batch} rows (one per object) and T >= 1, "
+                    f"got shape {tuple(thetas.shape)}"
+                )
+            flat = thetas.reshape(-1)
+            theta = (as_angle_tensor(flat, "thetas") if flat.numel() else flat.detach().double()).view(
+                thetas.shape
+            )
+        else:
+            theta = as_angle_tensor(thetas, "thetas")
         if bool((theta.abs() >= 90).any()):
             raise ValueError(
                 f"thetas must lie within (-90, 90) degrees of the first seed view, got {theta.tolist()}: "
@@ -143,7 +158,9 @@ class ViewWarp(torch.nn.Module):
             view1: (B, C, H, W) or (C, H, W) first seed view (angle 0).
             view2: same shape, second seed view (angle ``alpha``), or None to warp view 1 alone.
             correspondence: (B, H, W) correspondences between the seed views.
-            thetas: (T,) novel angles in degrees.
+            thetas: (T,) novel angles in degrees, the same for every object; or, where the
+                subclass's :meth:`maps` accepts it (:class:`NovelViewWarp`), a (B, T) tensor:
+                each object's own T angles, all B warped in one batched pass.
             masks: optional foreground masks of the seed views, (S, B, H, W) (or (S, H, W)
                 unbatched; S = 1 or 2 as views are given): silhouette-aware sampling, see
                 :meth:`apply_maps`.

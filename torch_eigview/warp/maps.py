@@ -36,7 +36,7 @@ class WarpMaps:
         src_x: (S, B, T, H, W) source column in seed view s for each target pixel.
         weight: (S, B, T, H, W) blend weight of seed view s (they sum to 1 per pixel).
         hit: (S, B, T, H, W) bool, True where seed view s sees the target pixel.
-        thetas: (T,) novel angles in degrees.
+        thetas: (T,) novel angles in degrees, or (B, T): each object's own angles.
         src_y: (S, B, T, H, W) source row, or None when every target pixel samples its
             own row (the camera axis is perpendicular to the rotation axis: a pure row warp).
     """
@@ -121,9 +121,10 @@ class RowGeometry:
     rows do not move. x follows Eq. 2 whatever the tilt.
 
     Attributes:
-        a: (1, T, 1, 1) Eq. 2's coefficient of the first seed view, per novel angle.
-        b: (1, T, 1, 1) the coefficient of the second seed view.
-        theta: (1, T, 1, 1) novel angles in radians.
+        a: (1, T, 1, 1) Eq. 2's coefficient of the first seed view, per novel angle, or
+            (B, T, 1, 1) when each object has its own angles.
+        b: (1, T, 1, 1) or (B, T, 1, 1), the coefficient of the second seed view.
+        theta: (1, T, 1, 1) or (B, T, 1, 1), novel angles in radians.
         c: column of the rotation axis.
         alpha: angle of the second seed view in radians.
         sign: (B, 1, 1, 1) +1 or -1, the way depth points towards the camera.
@@ -177,8 +178,9 @@ class RowGeometry:
 
         Args:
             correspondence: (B, H, W) correspondences between the seed views.
-            thetas: (T,) novel angles in degrees, stored in the result.
-            share_of_second: (1, T, 1, 1) the second seed's weight where both see a pixel.
+            thetas: (T,) or (B, T) novel angles in degrees, stored in the result.
+            share_of_second: (1, T, 1, 1) or (B, T, 1, 1) the second seed's weight where
+                both see a pixel.
             n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
 
         Returns:

@@ -116,31 +116,45 @@ class NovelViewWarp(ViewWarp):
             correspondence: (B, H, W) correspondences between the seed views (the
                 horizontal disparities; a tilted camera's vertical motion follows from them).
             thetas: (T,) novel angles in degrees from the first seed view, within a quarter
-                turn of it.
+                turn of it, the same for every object; or a (B, T) tensor, each object's own
+                angles (B different objects at B different angles: ``(B, 1)``). Every pixel's
+                map depends on its own object's angle only, so the (B, T) maps equal the
+                per-object calls stacked, built in one batched pass.
             n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
 
         Returns:
-            :class:`~torch_eigview.warp.maps.WarpMaps` with S = ``n_sources``; ``src_y`` is
-            None unless the camera has an elevation.
+            :class:`~torch_eigview.warp.maps.WarpMaps` with S = ``n_sources`` and ``thetas``
+            as given ((T,) or (B, T)); ``src_y`` is None unless the camera has an elevation.
         """
         self._check_n_sources(n_sources)
         d12 = correspondence.disparity_12
         dtype, device = d12.dtype, d12.device
-        theta = self._novel_angles(thetas)
-        _, _, w = correspondence.shape
+        b_objects, _, w = correspondence.shape
+        theta = self._novel_angles(thetas, batch=b_objects)
         c = (w - 1) / 2 if self.center is None else self.center
-        if self.camera is None:
-            coefficients = orthographic_coefficients(theta, self.alpha)
-        else:
-            affine = affine_coefficients(self.camera, self.alpha, theta)
-            coefficients = (affine.a, affine.b)
-            c = affine.center if self.center is None else c
-        a, b = (v.to(dtype=dtype, device=device).view(1, -1, 1, 1) for v in coefficients)
-        th = torch.deg2rad(theta).to(dtype=dtype, device=device).view(1, -1, 1, 1)
+        a, b, c = self._coefficients(theta, c)
+        # (1, T, 1, 1) for shared angles, (B, T, 1, 1) per object: both broadcast against
+        # the (B, 1, H, W) pixel grids of RowGeometry.
+        shape = (1 if theta.ndim == 1 else b_objects, theta.shape[-1], 1, 1)
+        a, b = (v.to(dtype=dtype, device=device).view(shape) for v in (a, b))
+        th = torch.deg2rad(theta).to(dtype=dtype, device=device).view(shape)
         cols = torch.arange(w, dtype=dtype, device=device).expand_as(d12)
         sign = self._depth_sign(cols - c, cols + d12 - c, correspondence.valid_12)
         geo = RowGeometry(a, b, th, c, math.radians(self.alpha), sign, self.max_stretch, self._tilt)
         return geo.maps(correspondence, theta, self._share_of_second(th), n_sources)
+
+    def _coefficients(self, theta: torch.Tensor, c: float) -> tuple[torch.Tensor, torch.Tensor, float]:
+        """Eq. 2's (a, b), each of the shape of ``theta`` ((T,) or (B, T)), and the axis column."""
+        flat = theta.reshape(-1)
+        if flat.numel() == 0:  # an empty batch of per-object angles: nothing to solve
+            return flat, flat, c
+        if self.camera is None:
+            a, b = orthographic_coefficients(flat, self.alpha)
+        else:
+            affine = affine_coefficients(self.camera, self.alpha, flat)
+            a, b = affine.a, affine.b
+            c = affine.center if self.center is None else c
+        return a.view(theta.shape), b.view(theta.shape), c
 
     @property
     def _tilt(self) -> float:
