@@ -16,6 +16,7 @@ import dataclasses
 import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -65,8 +66,17 @@ class Correspondence:
 
     def _map(self, fn: Callable[[torch.Tensor], torch.Tensor]) -> Correspondence:
         """The correspondence with ``fn`` applied to every tensor (None stays None)."""
+
+        def optional(t: torch.Tensor | None) -> torch.Tensor | None:
+            return None if t is None else fn(t)
+
         return Correspondence(
-            *(None if t is None else fn(t) for t in (getattr(self, f.name) for f in dataclasses.fields(self)))
+            fn(self.disparity_12),
+            fn(self.disparity_21),
+            fn(self.valid_12),
+            fn(self.valid_21),
+            optional(self.vertical_12),
+            optional(self.vertical_21),
         )
 
     def to(
@@ -135,7 +145,7 @@ class Correspondence:
                     f"items[{i}] has (H, W) = {item.shape[1:]}, items[0] has {items[0].shape[1:]}: "
                     "all correspondences of a batch must have one image size"
                 )
-        fields = {}
+        fields: dict[str, Any] = {}
         for f in dataclasses.fields(cls):
             values = [getattr(item, f.name) for item in items]
             present = [v is not None for v in values]
