@@ -67,6 +67,7 @@ SUBPACKAGES = {
         "BLENDS",
         "NovelViewWarp",
         "PerspectiveWarp",
+        "RandomTurntableRotation",
         "SparseViewOperator",
         "WarpMaps",
         "foreground_mask",

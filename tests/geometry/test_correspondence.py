@@ -315,7 +315,7 @@ def test_indexing_selects_view_pairs(index: object, rows: list[int]) -> None:
 def test_len_iteration_and_collate_invert_indexing() -> None:
     corr = _batch()
     assert len(corr) == 4 and len(corr[:0]) == 0
-    items = list(corr)  # __getitem__ with an IndexError at the end: one B = 1 pair each
+    items = list(corr)  # one B = 1 pair each
     assert [item.shape for item in items] == [(1, 3, 8)] * 4
     _assert_same_fields(Correspondence.collate(items), corr)
     _assert_same_fields(Correspondence.collate([corr[:1], corr[1:]]), corr)

@@ -233,6 +233,6 @@ def test_forward_errors() -> None:
             view1, view2, correspondence=corr, params={"degrees": torch.zeros(2), "batch_prob": torch.ones(1)}
         )
     with pytest.raises(TypeError, match="params must be a dict"):
-        aug(view1, view2, correspondence=corr, params=[torch.zeros(2)])  # type: ignore[arg-type]
+        aug(view1, view2, correspondence=corr, params=[torch.zeros(2)])
     with pytest.raises(ValueError, match="correspondence must have shape"):
         aug(view1, view2, correspondence=corr[:1], params={"degrees": torch.zeros(2)})

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -63,6 +63,10 @@ class Correspondence:
     def __len__(self) -> int:
         """B, the number of view pairs (a ``Dataset`` or ``Sampler`` sizes itself by it)."""
         return self.disparity_12.shape[0]
+
+    def __iter__(self) -> Iterator[Correspondence]:
+        """The view pairs one by one, each a correspondence of B = 1 (``self[i]``)."""
+        return (self[i] for i in range(len(self)))
 
     def _map(self, fn: Callable[[torch.Tensor], torch.Tensor]) -> Correspondence:
         """The correspondence with ``fn`` applied to every tensor (None stays None)."""
