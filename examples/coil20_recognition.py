@@ -14,7 +14,7 @@ components, 1-NN over the 380 test views at −45°..45° (5° steps). Methods:
 - ``sparse``: an eigenspace of the two seed views alone;
 - ``dense``: an eigenspace of the real views every 5° over −20°..20°.
 
-Run: ``python examples/coil20_recognition.py [--root ../shared/data/coil-20-proc] [--json out.json]``
+Run: ``python examples/coil20_recognition.py [--root DIR] [--json out.json]``
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from pathlib import Path
 
 from torch_eigview import CoilFolder, SynthesisOptions
 from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.datasets import find_coil_root
 
 PAPER = {5: 97.89, 10: 93.42, 15: 91.42}
-DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
 
 
 def experiments(alpha: float) -> dict[str, CoilExperiment]:
@@ -43,13 +43,19 @@ def experiments(alpha: float) -> dict[str, CoilExperiment]:
     }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", default=str(DEFAULT_ROOT))
+    parser.add_argument(
+        "--root",
+        help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc)",
+    )
     parser.add_argument("--alphas", type=float, nargs="+", default=[5, 10, 15])
     parser.add_argument("--json", help="write all results here")
-    args = parser.parse_args()
-    folder = CoilFolder(args.root)
+    args = parser.parse_args(argv)
+    try:  # a missing folder: say where the images go, not a traceback
+        folder = CoilFolder(find_coil_root(args.root))
+    except ValueError as exc:
+        parser.error(str(exc))
     rows, records = [], {}
     for alpha in args.alphas:
         row = {"alpha": alpha, "paper": PAPER.get(int(alpha))}

@@ -12,19 +12,18 @@ components, 1-NN over the 380 test views at −45°..45°), the same gallery goe
 The cosine kernel is left out: on unit-norm views it is the linear kernel. After the table,
 the Nyström approximation error ‖K − K̃‖_F/‖K‖_F of the rbf kernel on the α = 5 gallery.
 
-Run: ``python examples/kernel_pca.py [--root ../shared/data/coil-20-proc] [--out kernel_pca.png]``
+Run: ``python examples/kernel_pca.py [--root DIR] [--out kernel_pca.png]``
 """
 
 from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from torch_eigview import CoilFolder, KernelEigenspace, KernelProjection
 from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.datasets import find_coil_root
 
-DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
 METHODS: dict[str, dict[str, object]] = {
     "linear": {},
     "rbf": {"kernel": "rbf", "gamma": "median"},
@@ -32,13 +31,19 @@ METHODS: dict[str, dict[str, object]] = {
 }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", default=str(DEFAULT_ROOT))
+    parser.add_argument(
+        "--root",
+        help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc)",
+    )
     parser.add_argument("--alphas", type=float, nargs="+", default=[5, 10, 15])
     parser.add_argument("--out", default="kernel_pca.png", help="the PNG to write")
-    args = parser.parse_args()
-    folder = CoilFolder(args.root)
+    args = parser.parse_args(argv)
+    try:  # a missing folder: say where the images go, not a traceback
+        folder = CoilFolder(find_coil_root(args.root))
+    except ValueError as exc:
+        parser.error(str(exc))
     rows = []
     gallery = None
     for alpha in args.alphas:

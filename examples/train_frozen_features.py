@@ -7,7 +7,7 @@ frozen layer promises: its buffers never change and get no gradient, gradients s
 the input images, and it works under ``torch.compile``, after ``.to(dtype)`` (and
 ``.to(device)`` with CUDA), and through a ``state_dict`` round trip.
 
-Run: ``python examples/train_frozen_features.py [--root ../shared/data/coil-20-proc] [--quick]``
+Run: ``python examples/train_frozen_features.py [--root DIR] [--quick]``
 """
 
 from __future__ import annotations
@@ -16,14 +16,13 @@ import argparse
 import copy
 import io
 import time
-from pathlib import Path
 
 import torch
 from torch import nn
 
 from torch_eigview import CoilFolder, EigenProjection, Eigenspace, SynthesisOptions, synthesize_views
+from torch_eigview.datasets import find_coil_root
 
-DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
 TEST_ANGLES = [float(a) for a in range(-45, 50, 5)]
 
 
@@ -63,7 +62,10 @@ def make_model(projection: EigenProjection, n_classes: int) -> nn.Sequential:
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", type=Path, default=DEFAULT_ROOT)
+    parser.add_argument(
+        "--root",
+        help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc)",
+    )
     parser.add_argument("--alpha", type=float, default=5.0)
     parser.add_argument("--components", type=int, default=15)
     parser.add_argument("--epochs", type=int, default=60)
@@ -75,7 +77,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     torch.manual_seed(0)
     t0 = time.perf_counter()
 
-    folder = CoilFolder(args.root)
+    try:  # a missing folder: say where the images go, not a traceback
+        folder = CoilFolder(find_coil_root(args.root))
+    except ValueError as exc:
+        parser.error(str(exc))
     objects = folder.objects[:3] if args.quick else folder.objects
     thetas = [float(t) for t in range(-20, 21, 5 if args.quick else 1)]
     epochs = 40 if args.quick else args.epochs

@@ -6,21 +6,19 @@ synthesizes the view of each object turned by θ about the vertical axis (Eq. 2)
 network sees new poses without new images. The warp is a differentiable function of the
 seed images (bilinear weights), so a loss on the augmented views reaches the seed views.
 
-Run: ``python examples/warp_augmentation.py [--root ../shared/data/coil-20-proc] [--quick]``
+Run: ``python examples/warp_augmentation.py [--root DIR] [--quick]``
 """
 
 from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import torch
 from torch import nn
 
 from torch_eigview import CoilFolder, Correspondence, NovelViewWarp, estimate_correspondence
-
-DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
+from torch_eigview.datasets import find_coil_root
 
 
 class RandomTurntableRotation(nn.Module):
@@ -52,7 +50,10 @@ class RandomTurntableRotation(nn.Module):
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", type=Path, default=DEFAULT_ROOT)
+    parser.add_argument(
+        "--root",
+        help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc)",
+    )
     parser.add_argument("--alpha", type=float, default=10.0)
     parser.add_argument("--max-theta", type=float, default=20.0)
     parser.add_argument("--steps", type=int, default=5)
@@ -60,7 +61,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
 
-    folder = CoilFolder(args.root)
+    try:  # a missing folder: say where the images go, not a traceback
+        folder = CoilFolder(find_coil_root(args.root))
+    except ValueError as exc:
+        parser.error(str(exc))
     objects = folder.objects[:2] if args.quick else folder.objects[:8]
     steps = 2 if args.quick else args.steps
     view1 = torch.stack([folder.image(obj, 0.0) for obj in objects])

@@ -34,6 +34,25 @@ def test_script_imports(path: Path) -> None:
     assert callable(getattr(module, "main", None)), f"{path.name} has no main()"
 
 
+COIL_EXAMPLES = ["coil20_recognition", "kernel_pca", "train_frozen_features", "warp_augmentation"]
+
+
+@pytest.mark.parametrize("name", COIL_EXAMPLES)
+def test_missing_data_says_where(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without the images a COIL example exits 2 naming the folder, the variable and the flag."""
+    monkeypatch.setenv("TORCH_EIGVIEW_DATA", str(tmp_path))
+    with pytest.raises(SystemExit) as info:
+        load(name).main([])
+    err = capsys.readouterr().err
+    assert info.value.code == 2
+    assert str(tmp_path / "coil-20-proc") in err and "TORCH_EIGVIEW_DATA" in err and "--root" in err
+    with pytest.raises(SystemExit) as info:
+        load(name).main(["--root", str(tmp_path / "nope")])
+    assert info.value.code == 2 and "must be an existing directory" in capsys.readouterr().err
+
+
 @pytest.mark.coil
 def test_train_frozen_features(coil_root: Path) -> None:
     # aot_eager: the same torch.compile path (Dynamo + AOTAutograd) without inductor's C++ build.

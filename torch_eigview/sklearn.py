@@ -97,7 +97,7 @@ class _EigenspaceTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, 
         return self
 
     def transform(self, X: Any) -> np.ndarray:
-        """(n_samples, n_features) rows → (n_samples, n_components_) coordinates, the fitted dtype."""
+        """``(n_samples, n_features)`` rows → ``(n_samples, n_components_)`` coordinates, the fitted dtype."""
         check_is_fitted(self)
         X = validate_data(self, X, dtype=_FLOATS, reset=False)
         x = _tensor(X).to(self._dtype)
@@ -134,10 +134,10 @@ class EigenspacePCA(_EigenspaceTransformer):
 
     Attributes:
         mean_: (n_features,) the mean row.
-        components_: (n_components_, n_features) orthonormal eigenvectors.
-        eigenvalues_: (n_components_,) eigenvalues of the centred scatter matrix.
-        explained_variance_: (n_components_,) ``eigenvalues_ / (n_samples - 1)``.
-        explained_variance_ratio_: (n_components_,) fractions of the total variance.
+        components_: ``(n_components_, n_features)`` orthonormal eigenvectors.
+        eigenvalues_: ``(n_components_,)`` eigenvalues of the centred scatter matrix.
+        explained_variance_: ``(n_components_,)`` ``eigenvalues_ / (n_samples - 1)``.
+        explained_variance_ratio_: ``(n_components_,)`` fractions of the total variance.
         n_components_: k.
         eigenspace_: the fitted ``Eigenspace`` (torch tensors).
 
@@ -173,7 +173,7 @@ class EigenspacePCA(_EigenspaceTransformer):
         self.explained_variance_ratio_ = _numpy(space.explained_variance_ratio_)
 
     def inverse_transform(self, X: Any) -> np.ndarray:
-        """(n_samples, n_components_) coordinates → (n_samples, n_features) rows (unit-norm ones
+        """``(n_samples, n_components_)`` coordinates → ``(n_samples, n_features)`` rows (unit-norm ones
         with ``unit_norm``)."""
         check_is_fitted(self)
         z = check_array(X, dtype=_FLOATS)
@@ -206,7 +206,7 @@ class EigenspaceKernelPCA(_EigenspaceTransformer):
         image_shape: (C, H, W) of the images the rows flatten, for :meth:`to_module`.
 
     Attributes:
-        eigenvalues_: (n_components_,) eigenvalues of the centred kernel matrix.
+        eigenvalues_: ``(n_components_,)`` eigenvalues of the centred kernel matrix.
         gamma_: the γ used.
         n_components_: k.
         eigenspace_: the fitted ``KernelEigenspace`` (torch tensors).

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from torch_eigview.apps.cli import main
+from torch_eigview.apps.cli import main, progress_bar
+from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.io.checkpoint import load_recognizer
 
 # Two objects, seeds at 0 and 10 degrees, 4 synthesized views each, 5 test views each.
@@ -128,10 +129,36 @@ def test_bad_arguments(
     assert message in err
 
 
-def test_missing_arguments(capsys: pytest.CaptureFixture[str]) -> None:
+def test_missing_arguments(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     assert _exit_status([], capsys)[0] == 2
+    # Without --root the images are looked for in $TORCH_EIGVIEW_DATA/coil-20-proc: absent here.
+    monkeypatch.setenv("TORCH_EIGVIEW_DATA", str(tmp_path))
     code, err = _exit_status(["coil", "--alpha", "10"], capsys)
     assert code == 2 and "--root" in err
+    assert str(tmp_path / "coil-20-proc") in err and "TORCH_EIGVIEW_DATA" in err
+    assert "Traceback" not in err
+
+
+def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--root`` defaults to ``$TORCH_EIGVIEW_DATA/coil-20-proc``; the flag wins over it."""
+    from torch_eigview.apps import experiment
+
+    seen: list[Path] = []
+
+    def run(self: object, folder: CoilFolder, progress: object = None) -> None:
+        seen.append(folder.root)
+        raise ValueError("stop here")  # the folder was found; the experiment itself is tested above
+
+    monkeypatch.setattr(experiment.CoilExperiment, "run", run)
+    monkeypatch.setenv("TORCH_EIGVIEW_DATA", str(coil_root.parent))
+    with pytest.raises(SystemExit):
+        main(["coil", "--alpha", "10"])
+    monkeypatch.setenv("TORCH_EIGVIEW_DATA", "/no/such/folder")
+    with pytest.raises(SystemExit):
+        main(["coil", "--alpha", "10", "--root", str(coil_root)])
+    assert seen == [coil_root, coil_root]
 
 
 @pytest.mark.coil
@@ -180,3 +207,69 @@ def test_module_entry_point(coil_root: Path, tmp_path: Path) -> None:
         cwd=tmp_path,
     )
     assert bad.returncode == 2 and "holds no COIL files" in bad.stderr
+
+
+class _Terminal(io.StringIO):
+    """A stderr that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bar_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert progress_bar(False, "objects", "obj") is None  # a pipe or a log: no bar
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    assert progress_bar(True, "objects", "obj") is None  # --quiet
+    bar = progress_bar(False, "objects", "obj")
+    assert bar is not None
+    assert list(bar(range(3))) == [0, 1, 2]
+    assert "objects:" in terminal.getvalue() and "/3 [" in terminal.getvalue()  # the bar was drawn
+
+
+@pytest.mark.parametrize("quiet", [False, True], ids=["terminal", "quiet"])
+@pytest.mark.parametrize("command", ["demo", "synth"])
+def test_demo_and_synth_get_progress(command: str, quiet: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``eigview demo`` / ``synth`` hand their loop a tqdm bar on a terminal, none with --quiet."""
+    from torch_eigview.apps import demo
+
+    calls: list[object] = []
+
+    def fake(*args: object, progress: object = None, **kwargs: object) -> dict[str, object]:
+        calls.append(progress)
+        return {}
+
+    monkeypatch.setattr(demo, f"run_{command}", fake)
+    monkeypatch.setattr(sys, "stderr", _Terminal())
+    argv = [command, "--png", ""] if command == "demo" else [command]
+    assert main([*argv, *(["--quiet"] if quiet else [])]) == 0
+    assert len(calls) == 1 and (calls[0] is None) == quiet
+
+
+def test_demo_loop_reports_each_object() -> None:
+    """The demo's progress wrapper sees every object of the scene, in order."""
+    from torch_eigview.apps.demo import recognition_experiment
+    from torch_eigview.apps.synthetic_scene import SyntheticScene
+    from torch_eigview.datasets import OrthographicCamera
+
+    seen: list[str] = []
+
+    def progress(names: object) -> object:
+        for name in names:  # type: ignore[attr-defined]
+            seen.append(name)
+            yield name
+
+    scene = SyntheticScene(shapes=("head", "egg"), camera=OrthographicCamera(24))
+    record = recognition_experiment(
+        10.0,
+        2,
+        scene=scene,
+        components=3,
+        correspondences="exact",
+        synth=(-5.0, 5.0, 5.0),
+        test=(0.0, 2.0),
+        progress=progress,
+    )
+    assert seen == ["head", "egg"]
+    assert record["n_gallery"] == 2 * 3

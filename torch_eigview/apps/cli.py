@@ -13,14 +13,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 if TYPE_CHECKING:
     from torch_eigview.apps.experiment import CoilResult
 
-__all__ = ["main"]
+__all__ = ["main", "progress_bar"]
+
+T = TypeVar("T")
 
 
 def _components(text: str) -> int | float:
@@ -70,7 +72,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True)
     coil = sub.add_parser("coil", help="the COIL recognition experiment (paper Fig. 4(b))")
-    coil.add_argument("--root", required=True, help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100)")
+    coil.add_argument(
+        "--root",
+        default=None,
+        help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100); default: coil-20-proc/ in "
+        "$TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc beside the checkout",
+    )
     coil.add_argument("--alpha", type=float, required=True, help="angle between seed views, degrees")
     coil.add_argument("--center", type=float, default=0.0, help="pose of the first seed view, degrees")
     coil.add_argument("--views", type=int, default=2, choices=(2, 3), help="seed views per object")
@@ -117,12 +124,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
     )
     _add_export_and_predict(sub)
+    _add_quiet(coil)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
     demo.add_argument("--alpha", type=float, default=10.0, help="angle between the two seed views, degrees")
     demo.add_argument("--size", type=int, default=64, help="image side in pixels")
     demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
     demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    _add_quiet(demo)
     synth = sub.add_parser(
         "synth", help="the Fig. 2 protocol per camera model (orthographic, affine, perspective)"
     )
@@ -135,9 +144,30 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    _add_quiet(synth)
     # Listed for --help; main() hands its arguments to torch_eigview.apps.bench unparsed.
     sub.add_parser("bench", help="benchmarks (warp, eigen step, GEMM, scaling): eigview bench --help")
     return parser
+
+
+def _add_quiet(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)"
+    )
+
+
+def progress_bar(quiet: bool, desc: str, unit: str) -> Callable[[Iterable[T]], Iterable[T]] | None:
+    """A tqdm wrapper for a command's main loop, or None when ``quiet`` or stderr is no terminal.
+
+    The bar goes to stderr, so it shows whenever a person watches the command, even with
+    stdout redirected to a file; a log or a pipe (stderr not a TTY) gets no bar.
+    ``leave=False``: the bar disappears when done, and the results print below it alone.
+    """
+    if quiet or not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return partial(tqdm, desc=desc, unit=unit, leave=False, file=sys.stderr)
 
 
 def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -188,11 +218,11 @@ def format_table(result: CoilResult, title: str) -> str:
 
 def _run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.apps.experiment import CoilExperiment
-    from torch_eigview.datasets.coil import CoilFolder
+    from torch_eigview.datasets.coil import CoilFolder, find_coil_root
     from torch_eigview.io.checkpoint import save_recognizer
     from torch_eigview.synthesis import SynthesisOptions
 
-    folder = CoilFolder(args.root)
+    folder = CoilFolder(find_coil_root(args.root))
     experiment = CoilExperiment(
         alpha=args.alpha,
         center=args.center,
@@ -215,12 +245,7 @@ def _run_coil(args: argparse.Namespace) -> int:
     )
     if args.kernel and args.save:
         raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
-    progress = None
-    if sys.stderr.isatty():
-        from tqdm import tqdm
-
-        progress = partial(tqdm, desc=f"{args.method} objects", unit="obj")
-    result = experiment.run(folder, progress=progress)
+    result = experiment.run(folder, progress=progress_bar(args.quiet, f"{args.method} objects", "obj"))
     title = f"COIL {args.method}: alpha={args.alpha:g}, {args.views} seed views, center={args.center:g}"
     if args.kernel:
         title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
@@ -237,7 +262,13 @@ def _run_coil(args: argparse.Namespace) -> int:
 def _run_demo(args: argparse.Namespace) -> int:
     from torch_eigview.apps.demo import run_demo
 
-    record = run_demo(args.png or None, args.alpha, size=args.size, correspondences=args.correspondences)
+    record = run_demo(
+        args.png or None,
+        args.alpha,
+        size=args.size,
+        correspondences=args.correspondences,
+        progress=progress_bar(args.quiet, "demo objects", "obj"),
+    )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(record, fh, indent=2, default=str)
@@ -259,6 +290,7 @@ def _run_synth(args: argparse.Namespace) -> int:
         size=args.size,
         correspondences=args.correspondences,
         shapes=shapes,
+        progress=progress_bar(args.quiet, f"synth {args.camera}", "run"),
     )
     if args.json:
         with open(args.json, "w") as fh:

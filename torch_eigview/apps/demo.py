@@ -14,7 +14,7 @@ and draws the eigenimages and, for one object, synthesized views beside rendered
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import torch
 
@@ -49,6 +49,7 @@ def recognition_experiment(
     correspondences: str = "flow",
     synth: tuple[float, float, float] | None = None,
     test: tuple[float, float] = (-45.0, 44.0),
+    progress: Callable[[Iterable[str]], Iterable[str]] | None = None,
 ) -> dict[str, object]:
     """Fig. 2(ii): one eigenspace of all objects' synthesized views, 1-NN on rendered views.
 
@@ -61,6 +62,8 @@ def recognition_experiment(
             ceiling), see :func:`synthetic_gallery`.
         synth: synthesized angles (start, stop, step), see :func:`synthetic_gallery`.
         test: (start, stop) of the test views, every 1°.
+        progress: optional wrapper over the loop of objects whose views are synthesized
+            (e.g. ``tqdm.tqdm``).
 
     Returns:
         A dict with ``accuracy`` (%), ``per_object`` (name → %), ``pose_mae_deg`` (mean
@@ -69,7 +72,8 @@ def recognition_experiment(
     """
     scene = scene or SyntheticScene()
     t_start = time.perf_counter()
-    x, labels, poses = stack_gallery(_gallery_blocks(scene, alpha, n_views, synth, correspondences))
+    names = progress(scene.shapes) if progress else scene.shapes
+    x, labels, poses = stack_gallery(_gallery_blocks(scene, names, alpha, n_views, synth, correspondences))
     t_gallery = time.perf_counter()
     recognizer = build_recognizer(x, labels, poses, components, label_names=list(scene.shapes))
     test_angles = angle_range(test[0], test[1], 1.0, name="test")
@@ -98,13 +102,14 @@ def recognition_experiment(
 
 def _gallery_blocks(
     scene: SyntheticScene,
+    names: Iterable[str],
     alpha: float,
     n_views: int,
     synth: tuple[float, float, float] | None,
     correspondences: str,
 ) -> Iterator[tuple[torch.Tensor, int, list[float]]]:
-    """Per object, in the scene's order, its synthesized views, its index and their angles."""
-    for i, name in enumerate(scene.shapes):
+    """Per object of ``names`` (the scene's, in order), its synthesized views, index and angles."""
+    for i, name in enumerate(names):
         views, thetas = synthetic_gallery(scene, name, alpha, n_views, synth, correspondences)
         yield views, i, thetas
 
@@ -139,6 +144,7 @@ def run_demo(
     size: int = 64,
     correspondences: str = "flow",
     verbose: bool = True,
+    progress: Callable[[Iterable[str]], Iterable[str]] | None = None,
 ) -> dict[str, object]:
     """The embedded demo: Fig. 2 of the paper on the five synthetic objects.
 
@@ -155,13 +161,14 @@ def run_demo(
         size: image side in pixels.
         correspondences: ``"flow"`` or ``"exact"``.
         verbose: print the table.
+        progress: optional wrapper over the object loop (e.g. ``tqdm.tqdm``).
 
     Returns:
         The :func:`recognition_experiment` record (without the recognizer) plus
         ``"figure"`` (the path written, or None).
     """
     scene = SyntheticScene(camera=OrthographicCamera(size))
-    result = recognition_experiment(alpha, 2, scene=scene, correspondences=correspondences)
+    result = recognition_experiment(alpha, 2, scene=scene, correspondences=correspondences, progress=progress)
     recognizer = result.pop("recognizer")
     assert isinstance(recognizer, NearestNeighborRecognizer)
     if verbose:
@@ -203,6 +210,7 @@ def run_synth(
     shapes: Sequence[str] = SHAPES,
     test: tuple[float, float] = (-45.0, 44.0),
     verbose: bool = True,
+    progress: Callable[[Iterable[tuple[int, float]]], Iterable[tuple[int, float]]] | None = None,
 ) -> dict[str, object]:
     """The Fig. 2 protocol for one camera model (``eigview synth --camera``).
 
@@ -214,6 +222,7 @@ def run_synth(
 
     The ``ceiling`` records run the same protocol on the rendered views at the gallery's
     angles (``correspondences="rendered"``): what perfect synthesis would reach.
+    ``progress`` optionally wraps the loop over the (N, α) runs (e.g. ``tqdm.tqdm``).
 
     Returns:
         ``{"camera", "results": [records without recognizers], "ceiling": [same], "synthesis_error":
@@ -223,18 +232,18 @@ def run_synth(
     scene = SyntheticScene(shapes=tuple(shapes), camera=default_camera(camera, size))
     results, ceiling = [], []
     by_angles: dict[tuple[float, ...], dict[str, object]] = {}  # the ceiling depends on the angles only
-    for n in views:
-        for alpha in alphas:
-            record = recognition_experiment(alpha, n, scene=scene, correspondences=correspondences, test=test)
-            record.pop("recognizer")
-            results.append(record)
-            angles = tuple(_gallery_angles(alpha, n, None)[1])
-            if angles not in by_angles:
-                by_angles[angles] = recognition_experiment(
-                    alpha, n, scene=scene, correspondences="rendered", test=test
-                )
-                by_angles[angles].pop("recognizer")
-            ceiling.append({**by_angles[angles], "alpha": alpha})
+    runs = [(n, alpha) for n in views for alpha in alphas]
+    for n, alpha in progress(runs) if progress else runs:
+        record = recognition_experiment(alpha, n, scene=scene, correspondences=correspondences, test=test)
+        record.pop("recognizer")
+        results.append(record)
+        angles = tuple(_gallery_angles(alpha, n, None)[1])
+        if angles not in by_angles:
+            by_angles[angles] = recognition_experiment(
+                alpha, n, scene=scene, correspondences="rendered", test=test
+            )
+            by_angles[angles].pop("recognizer")
+        ceiling.append({**by_angles[angles], "alpha": alpha})
     errors = {name: synthesis_error(scene, name, error_alpha, error_thetas) for name in scene.shapes}
     out = {
         "camera": camera,

@@ -9,7 +9,13 @@ from torch_eigview.datasets.cameras import (
     PerspectiveCamera,
     make_camera,
 )
-from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
+from torch_eigview.datasets.coil import (
+    DATA_ENV,
+    CoilFolder,
+    default_data_root,
+    find_coil_root,
+    parse_object_spec,
+)
 from torch_eigview.datasets.correspondence import (
     ViewCorrespondence,
     exact_correspondence,
@@ -22,6 +28,7 @@ from torch_eigview.datasets.shapes import SHAPES, SyntheticObject, make_object
 
 __all__ = [
     "CAMERAS",
+    "DATA_ENV",
     "SHAPES",
     "AffineCamera",
     "CoilFolder",
@@ -30,8 +37,10 @@ __all__ = [
     "Render",
     "SyntheticObject",
     "ViewCorrespondence",
+    "default_data_root",
     "exact_correspondence",
     "exact_correspondence_2d",
+    "find_coil_root",
     "make_camera",
     "make_object",
     "parse_object_spec",

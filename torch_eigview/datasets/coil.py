@@ -21,7 +21,10 @@ import torch
 from torch_eigview.check import as_angle_tensor, check_choice
 from torch_eigview.io.images import read_image, to_unit_float
 
-__all__ = ["CoilFolder", "parse_object_spec"]
+__all__ = ["DATA_ENV", "CoilFolder", "default_data_root", "find_coil_root", "parse_object_spec"]
+
+#: The environment variable naming the folder that holds the data sets (``coil-20-proc/``, …).
+DATA_ENV = "TORCH_EIGVIEW_DATA"
 
 # re.ASCII: ``\d`` alone would also accept non-ASCII digits such as "obj١__0.png".
 _FILE_RE = re.compile(r"obj([0-9]+)__([0-9]+)\.png", re.ASCII)
@@ -29,6 +32,58 @@ _SPEC_RE = re.compile(r"\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?", re.ASCII)
 _POSE_UNITS = ("auto", "index", "degrees")
 _N_INDEX_POSES = 72  # COIL-20: pose indices 0..71, 5 degrees apart
 _ANGLE_TOL = 1e-6  # degrees
+# A source checkout keeps its data beside it, in ../shared/data (this file is
+# <checkout>/torch_eigview/datasets/coil.py); an installed copy has no such folder.
+_CHECKOUT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+def default_data_root() -> Path:
+    """The folder that holds the data sets: ``$TORCH_EIGVIEW_DATA``, else ``../shared/data`` beside the checkout.
+
+    An empty ``TORCH_EIGVIEW_DATA`` counts as unset. The folder need not exist.
+    """
+    env = os.environ.get(DATA_ENV, "")
+    return Path(env).expanduser() if env else _CHECKOUT_DATA
+
+
+def find_coil_root(root: str | os.PathLike[str] | None = None, name: str = "coil-20-proc") -> Path:
+    """The folder of COIL images to read: ``root`` when given, else ``default_data_root() / name``.
+
+    The precedence is the commands' and examples': their ``--root`` flag, then the
+    ``TORCH_EIGVIEW_DATA`` environment variable (a folder holding ``coil-20-proc/``), then
+    ``../shared/data/coil-20-proc`` beside the checkout.
+
+    Args:
+        root: The COIL folder itself (``obj{O}__{P}.png`` files), or None for the default.
+        name: The folder under the data root when ``root`` is None (``"coil-20-proc"``
+            for the processed COIL-20, e.g. ``"coil-100"`` for COIL-100).
+
+    Returns:
+        The folder; it exists (whether it holds COIL files, :class:`CoilFolder` checks).
+
+    Raises:
+        TypeError: ``root`` is not a path or ``name`` not a str.
+        ValueError: The folder does not exist; the message says which folder was looked
+            for, why there, and the three ways to point at the images.
+    """
+    if root is not None and not isinstance(root, (str, os.PathLike)):
+        raise TypeError(f"root must be a str, a path or None, got {type(root).__name__}")
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a str such as 'coil-20-proc', got {type(name).__name__}")
+    path = Path(root) if root is not None else default_data_root() / name
+    if path.is_dir():
+        return path
+    if root is not None:
+        source = "given with --root"
+    elif os.environ.get(DATA_ENV):
+        source = f"from {DATA_ENV}={os.environ[DATA_ENV]}"
+    else:
+        source = f"the default, {DATA_ENV} being unset"
+    raise ValueError(
+        f"COIL images not found: root={str(path)!r} ({source}) must be an existing directory of "
+        f"obj{{O}}__{{P}}.png images. Put the {name}/ folder in {default_data_root()}, or set "
+        f"{DATA_ENV} to the folder that holds {name}/, or pass the folder itself with --root DIR."
+    )
 
 
 def parse_object_spec(spec: str) -> list[int]:
