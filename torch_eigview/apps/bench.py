@@ -333,7 +333,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         check_outputs([("--json", args.json), ("--png", args.png)])  # before the timings, not after
     except ValueError as exc:
-        parser.error(str(exc))
+        parser.exit(2, f"eigview bench: error: {exc}\n")
     quick = args.quick
     reps = 2 if quick else 5
     results: dict[str, Any] = {"quick": quick, "torch": torch.__version__, "threads": torch.get_num_threads()}

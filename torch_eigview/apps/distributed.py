@@ -81,7 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:  # every rank, before the group forms: all stop together, none waits on the others
         check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
     except ValueError as exc:
-        parser.error(str(exc))
+        parser.exit(2, f"torch_eigview.apps.distributed: error: {exc}\n")
     backend = "nccl" if torch.cuda.is_available() else "gloo"
     dist.init_process_group(backend, timeout=datetime.timedelta(seconds=args.timeout))
     try:

@@ -79,8 +79,10 @@ def _write(path: str | os.PathLike[str], payload: dict[str, Any]) -> None:
     """Checks ``path``, adds the digest and writes ``payload`` atomically."""
     text = check_output_path(path, "path")
     payload[_DIGEST_KEY] = payload_digest(payload)
-    with atomic_output(text) as tmp:
-        torch.save(payload, tmp)
+    with atomic_output(text) as tmp, open(tmp, "wb") as fh:
+        # A Python file: a failed write raises OSError with its errno (disk full, file-size
+        # limit), where torch's own file writer reports only "iostream error".
+        torch.save(payload, fh)
 
 
 def _read(path: str | os.PathLike[str], fmt: str, version: int, what: str) -> dict[str, Any]:

@@ -165,7 +165,7 @@ class ViewCache:
         data = stored.numpy().reshape(-1)
         self._check_space(data.nbytes)
         try:
-            _pwrite_all(self._fd, memoryview(data).cast("B"), self._end)  # the tensor's buffer, no copy
+            _pwrite_all(self._fd, data.data.cast("B"), self._end)  # the tensor's buffer, no copy
         except BaseException as exc:
             self._roll_back(exc)
             if isinstance(exc, OSError):
@@ -201,7 +201,7 @@ class ViewCache:
         out_dtype = torch.float64 if self.dtype == torch.float64 else torch.float32
         for offset, shape in self._blocks:
             data = np.empty(int(np.prod(shape)), dtype=_DTYPES[self.dtype])
-            if not _pread_all(self._fd, memoryview(data).cast("B"), offset):
+            if not _pread_all(self._fd, data.data.cast("B"), offset):
                 raise ValueError(f"ViewCache {self.path} ended before its block at byte {offset}")
             yield torch.from_numpy(data).reshape(shape).to(out_dtype)
 
