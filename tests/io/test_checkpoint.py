@@ -2,13 +2,26 @@
 
 from __future__ import annotations
 
+import errno
+import math
+import os
+import re
 from pathlib import Path
+from typing import BinaryIO
 
 import pytest
 import torch
 
 from torch_eigview.decomposition.eigenspace import Eigenspace
-from torch_eigview.io.checkpoint import FORMAT, FORMAT_VERSION, load_recognizer, save_recognizer
+from torch_eigview.io.checkpoint import (
+    FORMAT,
+    FORMAT_VERSION,
+    STATE_DICT_FORMAT,
+    load_recognizer,
+    load_state_dict,
+    save_recognizer,
+    save_state_dict,
+)
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -159,3 +172,121 @@ def test_metadata_that_cannot_be_loaded_is_refused_at_save(tmp_path: Path) -> No
     with pytest.raises(TypeError, match="metadata must hold JSON values"):
         save_recognizer(path, make_recognizer(), metadata)
     assert not path.exists()
+
+
+def _flip(path: Path, bit: int) -> None:
+    data = bytearray(path.read_bytes())
+    data[bit // 8] ^= 1 << (bit % 8)
+    path.write_bytes(bytes(data))
+
+
+def test_random_bit_flips_are_refused_or_harmless(saved: Path) -> None:
+    """Each of 20 random single-bit flips is refused with the file's name, or lands where
+    torch never reads (zip padding, header fields) and the model loads bit-identically."""
+    want, _ = load_recognizer(saved)
+    original = saved.read_bytes()
+    gen = torch.Generator().manual_seed(16)
+    refused = 0
+    for bit in torch.randint(len(original) * 8, (20,), generator=gen).tolist():
+        saved.write_bytes(original)
+        _flip(saved, bit)
+        try:
+            got, metadata = load_recognizer(saved)
+        except ValueError as exc:
+            assert str(saved) in str(exc), f"bit {bit}: {exc}"
+            refused += 1
+            continue
+        assert metadata == METADATA and got.label_names == want.label_names, f"bit {bit}"
+        for name, buffer in want.state_dict().items():
+            other = got.state_dict()[name]
+            same = torch.equal(other, buffer) if isinstance(buffer, torch.Tensor) else other == buffer
+            assert same, f"bit {bit} changed {name} and the file still loaded"
+    assert refused >= 5  # most of the file is tensor data and pickle, which are checked
+
+
+@pytest.mark.parametrize("entry", ["components", "codes", "poses", "label_names", "metadata", "unit_norm"])
+def test_changed_entry_is_a_checksum_mismatch(saved: Path, entry: str) -> None:
+    payload = torch.load(saved, weights_only=True)
+    value = payload[entry]
+    if isinstance(value, torch.Tensor):
+        flat = value.view(-1)
+        flat[3] = torch.nextafter(flat[3], torch.tensor(math.inf, dtype=flat.dtype))  # one ulp
+    elif entry == "label_names":
+        payload[entry] = ["cup", "duck", "cat"]
+    elif entry == "metadata":
+        payload[entry] = {**value, "accuracy": 5.0}
+    else:
+        payload[entry] = not value
+    torch.save(payload, saved)
+    with pytest.raises(
+        ValueError, match=rf"{re.escape(str(saved))}: checksum mismatch: the file is corrupted"
+    ):
+        load_recognizer(saved)
+
+
+def test_version_1_file_without_checksum_is_refused(saved: Path) -> None:
+    payload = torch.load(saved, weights_only=True)
+    payload["version"] = 1
+    del payload["sha256"]
+    torch.save(payload, saved)
+    with pytest.raises(ValueError, match=r"format version 1.*no checksum: save the model again"):
+        load_recognizer(saved)
+
+
+def test_save_replaces_atomically_and_keeps_the_old_file_on_failure(
+    saved: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    before = saved.read_bytes()
+
+    def failing_save(obj: object, f: BinaryIO) -> None:
+        f.write(b"PK\x03\x04 half a zip")
+        f.flush()
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(torch, "save", failing_save)
+    with pytest.raises(
+        OSError, match=r"could not write .*model\.pt.*No space left.*previous file.*unchanged"
+    ):
+        save_recognizer(saved, make_recognizer(unit_norm=False))
+    assert saved.read_bytes() == before
+    assert os.listdir(saved.parent) == ["model.pt"]  # the temporary file is gone
+
+
+def test_bad_output_paths_are_refused_before_writing(tmp_path: Path) -> None:
+    rec = make_recognizer()
+    with pytest.raises(ValueError, match=r"path='.*' is a directory"):
+        save_recognizer(tmp_path, rec)
+    with pytest.raises(ValueError, match=r"path='.*missing/m.pt': the folder '.*missing' does not exist"):
+        save_recognizer(tmp_path / "missing" / "m.pt", rec)
+    if os.path.exists("/dev/full"):
+        with pytest.raises(ValueError, match=r"path='/dev/full' is a character device"):
+            save_recognizer("/dev/full", rec)
+    assert os.listdir(tmp_path) == []
+
+
+def test_state_dict_round_trip_and_checksum(tmp_path: Path) -> None:
+    projection = make_recognizer().projection
+    path = tmp_path / "projection.pt"
+    save_state_dict(path, projection.state_dict())
+    state = load_state_dict(path)
+    for name, value in projection.state_dict().items():
+        assert torch.equal(state[name], value) if isinstance(value, torch.Tensor) else state[name] == value
+    copy = EigenProjection(torch.zeros(24), torch.zeros(4, 24), torch.zeros(4)).double()
+    copy.load_state_dict(state)
+    assert copy.image_shape == projection.image_shape and copy.unit_norm == projection.unit_norm
+    payload = torch.load(path, weights_only=True)
+    assert payload["format"] == STATE_DICT_FORMAT
+    payload["state_dict"]["mean"][0] += 1
+    torch.save(payload, path)
+    with pytest.raises(ValueError, match=r"projection\.pt: checksum mismatch"):
+        load_state_dict(path)
+    with pytest.raises(TypeError, match=r"state_dict\['x'\] must be a tensor or JSON-like"):
+        save_state_dict(path, {"x": object()})
+    with pytest.raises(ValueError, match="is not a torch_eigview state_dict"):
+        load_state_dict(_saved_recognizer(tmp_path))
+
+
+def _saved_recognizer(folder: Path) -> Path:
+    path = folder / "recognizer.pt"
+    save_recognizer(path, make_recognizer())
+    return path

@@ -29,6 +29,7 @@ import torch
 
 from torch_eigview.apps.bench_plot import plot_results
 from torch_eigview.apps.bench_scaling import bench_coil100, bench_scaling, run_case, smooth_views
+from torch_eigview.files import check_outputs, write_json
 
 __all__ = ["main", "smooth_views"]
 
@@ -324,10 +325,15 @@ def _section_coil100(results: dict[str, Any], quick: bool) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Runs the benchmarks, prints them, optionally writes JSON and a PNG; returns 0."""
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
     if args.worker is not None:
         print(json.dumps(run_case(json.loads(args.worker))))
         return 0
+    try:
+        check_outputs([("--json", args.json), ("--png", args.png)])  # before the timings, not after
+    except ValueError as exc:
+        parser.exit(2, f"eigview bench: error: {exc}\n")
     quick = args.quick
     reps = 2 if quick else 5
     results: dict[str, Any] = {"quick": quick, "torch": torch.__version__, "threads": torch.get_num_threads()}
@@ -344,13 +350,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         _section_scaling(results, quick)
     if "coil100" in args.sections:
         _section_coil100(results, quick)
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(results, fh, indent=2)
-        print(f"\nwrote {args.json}")
-    if args.png:
-        plot_results(results, args.png)
-        print(f"wrote {args.png}")
+    try:
+        if args.json:
+            write_json(args.json, results)
+            print(f"\nwrote {args.json}")
+        if args.png:
+            plot_results(results, args.png)
+            print(f"wrote {args.png}")
+    except OSError as exc:  # disk full or the like: the figures above are printed, say what failed
+        parser.exit(2, f"eigview bench: error: {exc}\n")
     return 0
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from torch_eigview.files import atomic_open
+
 __all__ = ["plot_results"]
 
 
@@ -57,5 +59,6 @@ def plot_results(results: dict[str, Any], path: str) -> None:
             ax.set(xlabel=xlabel, title=f"eigenspace scaling ({part.replace('_', ' ')})")
             ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_open(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)

@@ -11,11 +11,12 @@ Torch-using modules are imported inside the subcommands: ``predict`` never impor
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from typing import TYPE_CHECKING, TypeVar
+
+from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
     from torch_eigview.apps.experiment import CoilResult
@@ -190,7 +191,8 @@ def _run_export(args: argparse.Namespace) -> int:
     from torch_eigview.io.checkpoint import load_recognizer
     from torch_eigview.io.onnx import export_projection, export_recognizer
 
-    recognizer, _ = load_recognizer(args.model)
+    check_outputs([("--out", args.out)], inputs=[("--model", args.model)])
+    recognizer, _ = load_recognizer(args.model)  # verifies the model's checksum
     if args.recognizer:
         info = export_recognizer(recognizer, args.out, opset_version=args.opset)
     else:
@@ -222,6 +224,7 @@ def _run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.io.checkpoint import save_recognizer
     from torch_eigview.synthesis import SynthesisOptions
 
+    check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
     folder = CoilFolder(find_coil_root(args.root))
     experiment = CoilExperiment(
         alpha=args.alpha,
@@ -251,8 +254,7 @@ def _run_coil(args: argparse.Namespace) -> int:
         title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
     print(format_table(result, title))
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result.to_json(), fh, indent=2)
+        write_json(args.json, result.to_json())
     if args.save:
         meta = {"command": "coil", "alpha": args.alpha, "method": args.method, "accuracy": result.accuracy}
         save_recognizer(args.save, result.recognizer, meta)
@@ -262,6 +264,7 @@ def _run_coil(args: argparse.Namespace) -> int:
 def _run_demo(args: argparse.Namespace) -> int:
     from torch_eigview.apps.demo import run_demo
 
+    check_outputs([("--png", args.png), ("--json", args.json)])
     record = run_demo(
         args.png or None,
         args.alpha,
@@ -270,8 +273,7 @@ def _run_demo(args: argparse.Namespace) -> int:
         progress=progress_bar(args.quiet, "demo objects", "obj"),
     )
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(record, fh, indent=2, default=str)
+        write_json(args.json, record, default=str)
     return 0
 
 
@@ -279,6 +281,7 @@ def _run_synth(args: argparse.Namespace) -> int:
     from torch_eigview.apps.demo import run_synth
     from torch_eigview.datasets import SHAPES
 
+    check_outputs([("--json", args.json)])
     shapes = SHAPES if args.shapes is None else tuple(args.shapes.split(","))
     unknown = sorted(set(shapes) - set(SHAPES))
     if unknown:
@@ -293,8 +296,7 @@ def _run_synth(args: argparse.Namespace) -> int:
         progress=progress_bar(args.quiet, f"synth {args.camera}", "run"),
     )
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(record, fh, indent=2, default=str)
+        write_json(args.json, record, default=str)
     return 0
 
 
@@ -320,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from torch_eigview.apps.predict import run
 
             return run(args)
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:  # OSError: an output that failed to write (disk full)
         parser.exit(2, f"eigview: error: {exc}\n")
     return 1
 

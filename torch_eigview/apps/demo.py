@@ -27,6 +27,7 @@ from torch_eigview.apps.synthetic_scene import (
     synthetic_gallery,
 )
 from torch_eigview.datasets import SHAPES, OrthographicCamera
+from torch_eigview.files import atomic_open, check_output_path
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -156,7 +157,7 @@ def run_demo(
 
     Args:
         out_png: path of the figure, or None for none (needs matplotlib; without it the
-            figure is skipped with a message).
+            figure is skipped with a message); checked before the run, replaced atomically.
         alpha: angle between the two seed views in degrees.
         size: image side in pixels.
         correspondences: ``"flow"`` or ``"exact"``.
@@ -167,6 +168,8 @@ def run_demo(
         The :func:`recognition_experiment` record (without the recognizer) plus
         ``"figure"`` (the path written, or None).
     """
+    if out_png is not None:
+        check_output_path(out_png, "out_png")  # before the run, not after it
     scene = SyntheticScene(camera=OrthographicCamera(size))
     result = recognition_experiment(alpha, 2, scene=scene, correspondences=correspondences, progress=progress)
     recognizer = result.pop("recognizer")
@@ -305,6 +308,7 @@ def _figure(
         axes[3, j].set_title(f"rendered {a:g}°", fontsize=8)
     fig.suptitle(f"Fig. 2: seeds at 0° and {alpha:g}° ({corr} correspondences)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    with atomic_open(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
     return path

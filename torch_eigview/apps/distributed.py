@@ -16,6 +16,8 @@ from collections.abc import Sequence
 import torch
 import torch.distributed as dist
 
+from torch_eigview.files import check_outputs, write_json
+from torch_eigview.io.checkpoint import save_state_dict
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.scale.distributed import fit_distributed
 
@@ -39,7 +41,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--components", type=int, default=15)
     p.add_argument("--method", choices=_METHODS, default="exact")
     p.add_argument("--timeout", type=float, default=30.0, help="collective timeout in seconds")
-    p.add_argument("--save", default=None, help="rank 0 writes the EigenProjection state_dict here")
+    p.add_argument(
+        "--save",
+        default=None,
+        help="rank 0 writes the EigenProjection state_dict here, checksummed (read it with "
+        "torch_eigview.io.checkpoint.load_state_dict)",
+    )
     p.add_argument("--json", default=None, help="rank 0 writes a summary here")
     return p
 
@@ -69,7 +76,12 @@ def _local_views(args: argparse.Namespace, rank: int, world: int) -> torch.Tenso
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point under torchrun (reads RANK, WORLD_SIZE, MASTER_ADDR/PORT from the env)."""
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:  # every rank, before the group forms: all stop together, none waits on the others
+        check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
+    except ValueError as exc:
+        parser.exit(2, f"torch_eigview.apps.distributed: error: {exc}\n")
     backend = "nccl" if torch.cuda.is_available() else "gloo"
     dist.init_process_group(backend, timeout=datetime.timedelta(seconds=args.timeout))
     try:
@@ -96,10 +108,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             }
             print(json.dumps(summary))
             if args.json:
-                with open(args.json, "w") as fh:
-                    json.dump(summary, fh, indent=2)
+                write_json(args.json, summary)
             if args.save:
-                torch.save(space.to_module().cpu().state_dict(), args.save)
+                save_state_dict(args.save, space.to_module().cpu().state_dict())
     finally:
         dist.destroy_process_group()
     return 0

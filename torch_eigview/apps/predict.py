@@ -15,7 +15,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from collections.abc import Sequence
@@ -24,7 +23,9 @@ from typing import Any
 
 import numpy as np
 
+from torch_eigview.files import check_output_path, write_json
 from torch_eigview.io.images import read_image, to_unit_float
+from torch_eigview.io.onnx_checksum import verify_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 
 __all__ = ["OnnxRecognizer", "Prediction", "add_arguments", "main", "run"]
@@ -53,7 +54,7 @@ class OnnxRecognizer:
 
     Raises:
         ValueError: the file is missing, not an ONNX model, not exported by torch_eigview,
-            or a projection rather than a recognizer.
+            corrupted (checksum mismatch), or a projection rather than a recognizer.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -68,6 +69,7 @@ class OnnxRecognizer:
             raise ValueError(f"ONNX model {self.path!r} could not be loaded by onnxruntime: {exc}") from exc
         props = self.session.get_modelmeta().custom_metadata_map
         self.info = OnnxModelInfo.from_props(props, source=f"ONNX model {self.path!r}")
+        verify_checksum(self.path)  # after the two checks above, which name a foreign file better
         if self.info.kind != "recognizer":
             raise ValueError(
                 f"ONNX model {self.path!r} is a {self.info.kind} (coefficients only); "
@@ -125,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     Raises:
         ValueError: the model cannot be used (the caller reports it, exit status 2).
     """
+    if args.json:  # before any image is read: a bad path must not cost the run
+        inputs = [("--onnx", args.onnx), *(("IMAGE", path) for path in args.images)]
+        check_output_path(args.json, "--json", inputs=inputs)
     model = OnnxRecognizer(args.onnx)
     good: list[np.ndarray] = []
     names: list[str] = []
@@ -140,8 +145,7 @@ def run(args: argparse.Namespace) -> int:
     for p in predictions:
         print(f"{p.image}\tlabel {p.label}\tpose {p.pose:g}\tdistance {p.distance:.6g}")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump([p.to_json() for p in predictions], fh, indent=2)
+        write_json(args.json, [p.to_json() for p in predictions])
     if n_failed:
         print(f"eigview predict: {n_failed} of {len(args.images)} images failed", file=sys.stderr)
     if args.debug_modules:

@@ -29,6 +29,8 @@ import torch
 from torch import nn
 
 from torch_eigview.check import check_int
+from torch_eigview.files import atomic_output, check_output_path
+from torch_eigview.io.onnx_checksum import append_checksum, verify_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
@@ -223,7 +225,8 @@ def export_onnx(
         model: an :class:`EigenProjection`, a :class:`NearestNeighborRecognizer`, any
             module with ``image_shape`` (C, H, W) and ``n_components`` (e.g. kernel PCA's
             ``KernelProjection``), or a fitted estimator with ``to_module()``.
-        path: the ``.onnx`` file to write.
+        path: the ``.onnx`` file to write; it is replaced atomically, and carries the
+            SHA-256 of its contents (:mod:`torch_eigview.io.onnx_checksum`).
         opset_version: ONNX opset, at least 18.
         fold: export an :class:`EigenProjection` as :class:`FoldedProjection` (default);
             False exports its ``forward`` as written (Sub on the images, then MatMul; with
@@ -235,9 +238,12 @@ def export_onnx(
 
     Raises:
         TypeError: ``model`` is not one of the above, or ``opset_version`` not an integer.
-        ValueError: ``image_shape`` is unknown or ``opset_version`` is below 18.
+        ValueError: ``image_shape`` is unknown, ``opset_version`` is below 18, or ``path``
+            cannot be written (a directory, a special file, a missing folder).
+        OSError: the write failed (disk full, file-size limit); ``path`` is unchanged.
         NotFittedError: ``model`` is an estimator that was not fitted.
     """
+    check_output_path(path, "path")
     opset_version = check_int(opset_version, "opset_version", minimum=MIN_OPSET)
     module, info, outputs = _prepare(model, fold)
     sample = torch.rand(2, *info.image_shape, generator=torch.Generator().manual_seed(0))
@@ -254,8 +260,16 @@ def export_onnx(
     if program is None:  # only with dynamo=False; keeps type checkers informed
         raise RuntimeError("torch.onnx.export returned no program")
     program.model.metadata_props.update(info.to_props())
-    program.save(os.fspath(path))
+    _save_verified(program, path)
     return info
+
+
+def _save_verified(program: Any, path: str | os.PathLike[str]) -> None:
+    """Writes the graph with its checksum trailer, atomically."""
+    with atomic_output(path) as tmp:
+        # One file: weights as external data would escape the checksum and the atomic rename.
+        program.save(tmp, external_data=False)
+        append_checksum(tmp)
 
 
 def export_projection(
@@ -277,9 +291,15 @@ def export_recognizer(
 
 
 def read_metadata(path: str | os.PathLike[str]) -> OnnxModelInfo:
-    """The :class:`OnnxModelInfo` of an exported file (reads the graph, not the weights)."""
+    """The :class:`OnnxModelInfo` of an exported file, after verifying its checksum.
+
+    Raises:
+        ValueError: the file is missing, corrupted (checksum mismatch) or not exported by
+            torch_eigview.
+    """
     import onnx
 
+    verify_checksum(path)
     model = onnx.load(os.fspath(path), load_external_data=False)
     props = {p.key: p.value for p in model.metadata_props}
     return OnnxModelInfo.from_props(props, source=os.fspath(path))
@@ -312,6 +332,7 @@ def compare_with_eager(
     import onnxruntime
 
     if session is None:
+        verify_checksum(path)
         session = onnxruntime.InferenceSession(os.fspath(path), providers=["CPUExecutionProvider"])
     x = images.detach().cpu().float()
     chunks: list[Sequence[np.ndarray]] = [
