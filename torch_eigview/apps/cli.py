@@ -288,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from torch_eigview.apps.predict import run
 
             return run(args)
-    except ValueError as exc:
+    except (ValueError, ImportError) as exc:  # a missing extra's message names the pip install
         parser.exit(2, f"eigview: error: {exc}\n")
     return 1
 
