@@ -39,7 +39,7 @@ def test_state_dict_loads_into_a_layer_built_from_sizes(kernel: str) -> None:
 
 def test_from_tensors_and_sizes_validation() -> None:
     vectors, coefficients, kernel_mean = torch.eye(4), torch.ones(4, 2) / 4, torch.full((4,), 0.25)
-    a = KernelProjection.from_tensors(vectors, coefficients, kernel_mean, "linear")
+    a = KernelProjection.from_tensors(vectors, coefficients, kernel_mean, kernel="linear")
     b = KernelProjection(vectors, coefficients, kernel_mean, "linear")
     x = torch.rand(3, 4, generator=torch.Generator().manual_seed(2))
     torch.testing.assert_close(a(x), b(x), atol=0, rtol=0)

@@ -262,7 +262,9 @@ def test_sizes_form_validation() -> None:
         EigenProjection(6, 2.0)  # type: ignore[arg-type]
     with pytest.raises(TypeError, match=r"eigenvalues must be None when the layer is built from sizes"):
         EigenProjection(6, 2, torch.ones(2))
-    with pytest.raises(ValueError, match=r"image_shape=\(1, 2, 2\) must be positive with C\*H\*W equal to the 6"):
+    with pytest.raises(
+        ValueError, match=r"image_shape=\(1, 2, 2\) must be positive with C\*H\*W equal to the 6"
+    ):
         EigenProjection(6, 2, image_shape=(1, 2, 2))
     with pytest.raises(TypeError, match=r"mean must be a torch\.Tensor, got int"):
         EigenProjection.from_tensors(6, torch.eye(6)[:2])  # type: ignore[arg-type]

@@ -122,7 +122,7 @@ class KernelProjection(FrozenProjection):
 
     Example:
         >>> vectors, coefficients = torch.eye(4), torch.ones(4, 2) / 4
-        >>> m = KernelProjection.from_tensors(vectors, coefficients, torch.full((4,), 0.25), "linear")
+        >>> m = KernelProjection.from_tensors(vectors, coefficients, torch.full((4,), 0.25), kernel="linear")
         >>> m(torch.ones(3, 4)).shape
         torch.Size([3, 2])
         >>> fresh = KernelProjection(4, 4, 2)
@@ -184,17 +184,7 @@ class KernelProjection(FrozenProjection):
 
     @classmethod
     def from_tensors(
-        cls,
-        vectors: torch.Tensor,
-        coefficients: torch.Tensor,
-        kernel_mean: torch.Tensor,
-        kernel: str = "rbf",
-        gamma: float | None = None,
-        degree: int = 3,
-        coef0: float = 1.0,
-        eigenvalues: torch.Tensor | None = None,
-        image_shape: tuple[int, int, int] | None = None,
-        unit_norm: bool = False,
+        cls, vectors: torch.Tensor, coefficients: torch.Tensor, kernel_mean: torch.Tensor, **options: Any
     ) -> KernelProjection:
         """The layer holding copies of a kernel fit's tensors.
 
@@ -202,24 +192,13 @@ class KernelProjection(FrozenProjection):
             vectors: (T, N) stored views.
             coefficients: (T, k) map from a centred kernel row to coordinates.
             kernel_mean: (T,) mean kernel row of the training views against ``vectors``.
-            kernel, gamma, degree, coef0, eigenvalues, image_shape, unit_norm: as for the class.
+            **options: the class's keyword arguments (``kernel``, ``gamma``, ``degree``,
+                ``coef0``, ``eigenvalues``, ``image_shape``, ``unit_norm``, ``dtype``, ``device``).
 
         Raises:
             TypeError, ValueError: as for the class.
         """
-        vectors = check_float_tensor(vectors, "vectors")
-        return cls(
-            vectors,
-            coefficients,
-            kernel_mean,
-            kernel,
-            gamma,
-            degree,
-            coef0,
-            eigenvalues,
-            image_shape,
-            unit_norm,
-        )
+        return cls(check_float_tensor(vectors, "vectors"), coefficients, kernel_mean, **options)
 
     def _register(self, tensors: tuple[torch.Tensor, ...], eigenvalues: torch.Tensor | None) -> None:
         """Checks (vectors, coefficients, kernel_mean) against each other and registers copies."""
