@@ -1,7 +1,9 @@
-"""Lazy public names (PEP 562) for packages whose submodules import torch.
+"""Lazy imports: public names (PEP 562) and the modules of the optional extras.
 
 ``import torch_eigview`` and ``import torch_eigview.io`` import nothing heavy: a name is
-imported from its submodule on first use and cached in the package's namespace. This
+imported from its submodule on first use and cached in the package's namespace. The
+optional dependencies (``[onnx]``, ``[plot]``, ``[sklearn]``) are imported where they are
+used, through :func:`require`, which names the extra to install when one is missing. This
 module imports no torch, so the torch-free parts (``eigview predict``) stay light.
 """
 
@@ -10,9 +12,38 @@ from __future__ import annotations
 import importlib
 import sys
 from collections.abc import Callable, Mapping, Sequence
+from types import ModuleType
 from typing import Any
 
-__all__ = ["attach"]
+__all__ = ["attach", "require"]
+
+
+def require(module: str, extra: str, purpose: str) -> ModuleType:
+    """Imports an optional dependency, or says which extra installs it.
+
+    Args:
+        module: the module to import, e.g. ``"onnxruntime"``.
+        extra: the ``torch_eigview`` extra that installs it, e.g. ``"onnx"``.
+        purpose: what needs it, for the message, e.g. ``"eigview predict"``.
+
+    Returns:
+        The imported module.
+
+    Raises:
+        ImportError: ``module`` is not installed (or fails to import); the message names
+            the ``pip install`` to run.
+
+    Example:
+        >>> require("json", "onnx", "reading metadata").__name__
+        'json'
+    """
+    try:
+        return importlib.import_module(module)
+    except ImportError as err:
+        raise ImportError(
+            f"{purpose} needs {module}, which is not installed: pip install 'torch_eigview[{extra}]'",
+            name=module,
+        ) from err
 
 
 def attach(

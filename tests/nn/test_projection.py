@@ -209,3 +209,70 @@ def test_onnx_matches_eager(tmp_path) -> None:
         assert actual.shape == (size, K)
         rel = np.abs(actual - expected).max() / np.abs(expected).max()
         assert rel <= 1e-5
+
+
+# --- built from sizes, as FrozenBatchNorm2d: a state_dict loads into a fresh layer -----------
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("eigenvalues", [True, False], ids=["eigenvalues", "no-eigenvalues"])
+def test_state_dict_loads_into_a_layer_built_from_sizes(dtype: torch.dtype, eigenvalues: bool) -> None:
+    est, x = make_estimator(dtype)
+    fitted = EigenProjection.from_tensors(
+        est.mean_, est.components_, est.eigenvalues_ if eigenvalues else None, IMAGE_SHAPE, unit_norm=True
+    )
+    buffer = io.BytesIO()
+    torch.save(fitted.state_dict(), buffer)
+    buffer.seek(0)
+    fresh = EigenProjection(N_FEATURES, K, image_shape=IMAGE_SHAPE, dtype=dtype)
+    assert float(fresh.components.abs().sum()) == 0.0 and fresh.eigenvalues.shape == (0,)
+    assert not fresh.unit_norm
+    fresh.load_state_dict(torch.load(buffer, weights_only=True))
+    assert fresh.unit_norm and fresh.image_shape == IMAGE_SHAPE  # restored from the extra state
+    assert torch.equal(fresh.eigenvalues, fitted.eigenvalues)
+    torch.testing.assert_close(fresh(x), fitted(x), atol=0, rtol=0)
+    torch.testing.assert_close(fresh.reconstruct(fresh(x)), fitted.reconstruct(fitted(x)), atol=0, rtol=0)
+    # The extra state brings image_shape to a layer built without one.
+    bare = EigenProjection(N_FEATURES, K, dtype=dtype)
+    bare.load_state_dict(fitted.state_dict())
+    assert bare.image_shape == IMAGE_SHAPE and repr(bare) == repr(fitted)
+
+
+def test_sizes_form_defaults_and_the_tensor_form() -> None:
+    fresh = EigenProjection(N_FEATURES, K)
+    assert fresh.mean.dtype == torch.get_default_dtype() and fresh.mean.device.type == "cpu"
+    assert fresh.mean.shape == (N_FEATURES,) and fresh.components.shape == (K, N_FEATURES)
+    assert repr(fresh) == f"EigenProjection(in_features={N_FEATURES}, n_components={K})"
+    assert EigenProjection(N_FEATURES, K, dtype=torch.float64).components.dtype == torch.float64
+    # from_tensors and the positional tensor form build the same layer; dtype converts either.
+    est, x = make_estimator(torch.float64)
+    a = EigenProjection.from_tensors(est.mean_, est.components_, est.eigenvalues_, IMAGE_SHAPE)
+    b = EigenProjection(est.mean_, est.components_, est.eigenvalues_, IMAGE_SHAPE)
+    torch.testing.assert_close(a(x), b(x), atol=0, rtol=0)
+    c = EigenProjection(est.mean_, est.components_, dtype=torch.float32)
+    assert c.mean.dtype == torch.float32 and est.mean_.dtype == torch.float64
+
+
+def test_sizes_form_validation() -> None:
+    with pytest.raises(ValueError, match=r"n_features=0 must be >= 1"):
+        EigenProjection(0, 2)
+    with pytest.raises(ValueError, match=r"n_components=0 must be >= 1"):
+        EigenProjection(6, 0)
+    with pytest.raises(TypeError, match=r"n_components must be an integer, got float 2\.0"):
+        EigenProjection(6, 2.0)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"eigenvalues must be None when the layer is built from sizes"):
+        EigenProjection(6, 2, torch.ones(2))
+    with pytest.raises(
+        ValueError, match=r"image_shape=\(1, 2, 2\) must be positive with C\*H\*W equal to the 6"
+    ):
+        EigenProjection(6, 2, image_shape=(1, 2, 2))
+    with pytest.raises(TypeError, match=r"mean must be a torch\.Tensor, got int"):
+        EigenProjection.from_tensors(6, torch.eye(6)[:2])  # type: ignore[arg-type]
+    # A state_dict of other sizes is refused by load_state_dict; eigenvalues of a third shape too.
+    fitted = make_module()
+    with pytest.raises(RuntimeError, match=r"size mismatch for components"):
+        EigenProjection(N_FEATURES, K + 1).load_state_dict(fitted.state_dict())
+    state = fitted.state_dict()
+    state["eigenvalues"] = torch.ones(K + 2)
+    with pytest.raises(RuntimeError, match=r"size mismatch for eigenvalues"):
+        EigenProjection(N_FEATURES, K).load_state_dict(state)

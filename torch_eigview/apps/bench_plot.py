@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from torch_eigview.files import atomic_open
+from torch_eigview.lazy import require
 
 __all__ = ["plot_results"]
 
@@ -16,9 +17,11 @@ def plot_results(results: dict[str, Any], path: str) -> None:
         results: the record :func:`torch_eigview.apps.bench.main` writes as JSON; its
             ``"warp"`` and ``"scaling"`` sections are drawn, one panel each (two for scaling).
         path: the image to write.
-    """
-    import matplotlib
 
+    Raises:
+        ImportError: matplotlib is not installed (the message names the ``[plot]`` extra).
+    """
+    matplotlib = require("matplotlib", "plot", "the benchmark figure (--png)")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -28,6 +28,7 @@ from torch_eigview.apps.synthetic_scene import (
 )
 from torch_eigview.datasets import SHAPES, OrthographicCamera
 from torch_eigview.files import atomic_open, check_output_path
+from torch_eigview.lazy import require
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -185,9 +186,9 @@ def run_demo(
     result["figure"] = None
     if out_png is not None:
         try:
-            import matplotlib
-        except ImportError:
-            print("matplotlib is not installed: the figure is skipped (pip install matplotlib)")
+            matplotlib = require("matplotlib", "plot", "the demo's figure")
+        except ImportError as exc:
+            print(f"{exc}; the figure is skipped")
         else:
             matplotlib.use("Agg")
             result["figure"] = _figure(out_png, scene, recognizer, alpha, correspondences)

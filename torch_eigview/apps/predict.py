@@ -27,6 +27,7 @@ from torch_eigview.files import check_output_path, write_json
 from torch_eigview.io.images import read_image, to_unit_float
 from torch_eigview.io.onnx_checksum import verify_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.lazy import require
 
 __all__ = ["OnnxRecognizer", "Prediction", "add_arguments", "main", "run"]
 
@@ -55,11 +56,11 @@ class OnnxRecognizer:
     Raises:
         ValueError: the file is missing, not an ONNX model, not exported by torch_eigview,
             corrupted (checksum mismatch), or a projection rather than a recognizer.
+        ImportError: onnxruntime is not installed (the message names the extra).
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
-        import onnxruntime
-
+        onnxruntime = require("onnxruntime", "onnx", "eigview predict")
         self.path = os.fspath(path)
         if not os.path.isfile(self.path):
             raise ValueError(f"ONNX model {self.path!r} does not exist or is not a file")
@@ -160,7 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return run(args)
-    except ValueError as exc:
+    except (ValueError, ImportError) as exc:  # a missing extra's message names the pip install
         parser.exit(2, f"eigview predict: error: {exc}\n")
 
 

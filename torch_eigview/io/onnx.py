@@ -6,11 +6,10 @@ takes ``images`` (B, C, H, W) float32 and gives ``coefficients`` (B, k) for a pr
 ``metadata_props`` describe it (:class:`~torch_eigview.io.onnx_metadata.OnnxModelInfo`), so the
 torch-free ``eigview predict`` can check its inputs.
 
-An :class:`EigenProjection` is exported in a folded form, ``z = x @ Wᵀ − (mean @ Wᵀ)``
-(:class:`FoldedProjection`), which is the same map with one MatMul on the images and a
-(k,)-vector subtraction instead of a (B, N) one; ``mean @ Wᵀ`` is computed in float64 at
-export time. Any other module with ``image_shape`` and ``n_components`` (kernel PCA's
-``KernelProjection``) is exported as it is.
+An :class:`EigenProjection` is exported in a folded form (:class:`FoldedProjection`), a
+recognizer as :class:`ExportedRecognizer` (both in :mod:`torch_eigview.io.onnx_graphs`); any
+other module on images (kernel PCA's ``KernelProjection``, an ``nn.Sequential`` of a
+projection and a head) as it is. ``dynamo=False`` selects the TorchScript-based exporter.
 
 This file is ``torch_eigview/io/onnx.py``: inside the package ``import onnx`` means the
 onnx package (absolute imports); only running this file as a script would shadow it.
@@ -19,6 +18,7 @@ onnx package (absolute imports); only running this file as a script would shadow
 from __future__ import annotations
 
 import copy
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -28,11 +28,17 @@ import numpy as np
 import torch
 from torch import nn
 
-from torch_eigview.check import check_int
+from torch_eigview.check import check_float_tensor, check_int, check_ndim
 from torch_eigview.files import atomic_output, check_output_path
 from torch_eigview.io.onnx_checksum import append_checksum, verify_checksum
+from torch_eigview.io.onnx_graphs import (
+    ExportedRecognizer,
+    FoldedProjection,
+    image_shape_of,
+    projection_module,
+)
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
-from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.lazy import require
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
 __all__ = [
@@ -49,95 +55,6 @@ INPUT_NAME = "images"
 PROJECTION_OUTPUTS = ("coefficients",)
 RECOGNIZER_OUTPUTS = ("label_index", "pose", "distance")
 MIN_OPSET = 18
-
-
-class FoldedProjection(nn.Module):
-    """An :class:`EigenProjection` as one MatMul: ``z = x @ Wᵀ − b`` with ``b = mean @ Wᵀ``.
-
-    With ``unit_norm`` the scale moves past the product: ``(x/|x|) @ Wᵀ = (x @ Wᵀ)/|x|``,
-    a (B, k) division instead of a (B, N) one. Same map as the projection, up to rounding.
-    Takes (B, C, H, W) images only (the exported graph's input).
-
-    Args:
-        projection: the fitted projection; needs ``image_shape``.
-        dtype: dtype of the folded constants (and of the graph's input).
-    """
-
-    weight_t: torch.Tensor
-    bias: torch.Tensor
-
-    def __init__(self, projection: EigenProjection, dtype: torch.dtype = torch.float32) -> None:
-        super().__init__()
-        if not isinstance(projection, EigenProjection):
-            raise TypeError(f"projection must be an EigenProjection, got {type(projection).__name__}")
-        if projection.image_shape is None:
-            raise ValueError("projection.image_shape is None: an image projection needs its (C, H, W)")
-        self.image_shape = projection.image_shape
-        self.unit_norm = projection.unit_norm
-        w = projection.components.detach().cpu().double()
-        # Contiguous (N, k): the MatMul needs no Transpose node; the bias in float64 so that
-        # folding adds no rounding beyond the final cast.
-        self.register_buffer("weight_t", w.T.contiguous().to(dtype))
-        self.register_buffer("bias", (projection.mean.detach().cpu().double() @ w.T).to(dtype))
-
-    @property
-    def n_components(self) -> int:
-        return self.weight_t.shape[1]
-
-    def extra_repr(self) -> str:
-        return f"image_shape={self.image_shape}, n_components={self.n_components}, unit_norm={self.unit_norm}"
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, C, H, W) images → (B, k) coefficients."""
-        z = x.flatten(1) @ self.weight_t
-        if self.unit_norm:
-            # Two-stage sum of squares (rows, then the rest): onnxruntime's ReduceL2 sums the
-            # N = C*H*W squares in one float32 run, 5e-5 off on 128x128 images; summing W,
-            # then C*H values keeps the error near (W + C*H) eps, as good as torch's.
-            sq = x.square().sum(dim=-1).flatten(1).sum(dim=1, keepdim=True)
-            z = z / sq.sqrt().clamp_min(torch.finfo(x.dtype).tiny)
-        return z - self.bias
-
-
-class ExportedRecognizer(nn.Module):
-    """A :class:`NearestNeighborRecognizer` in export form: images → (label index, pose, distance).
-
-    The search is ``|z|² − 2 z·g + |g|²`` (MatMul), ReduceMin and ArgMin, then Gathers: no
-    loops. Labels become indices into :attr:`label_names` (the recognizer's names, else its
-    label values as strings, in sorted label order).
-    """
-
-    codes_t: torch.Tensor
-    codes_sqnorm: torch.Tensor
-    label_index: torch.Tensor
-    poses: torch.Tensor
-
-    def __init__(self, recognizer: NearestNeighborRecognizer, dtype: torch.dtype = torch.float32) -> None:
-        super().__init__()
-        if not isinstance(recognizer, NearestNeighborRecognizer):
-            raise TypeError(
-                f"recognizer must be a NearestNeighborRecognizer, got {type(recognizer).__name__}"
-            )
-        source = recognizer.projection
-        self.image_shape = _image_shape(source)
-        self.n_components = int(source.n_components)
-        self.unit_norm = bool(getattr(source, "unit_norm", False))
-        self.projection = _projection_module(source, fold=True, dtype=dtype)
-        labels = recognizer.labels.detach().cpu()
-        values = labels.unique()  # sorted
-        self.label_names = list(recognizer.label_names or [str(v) for v in values.tolist()])
-        codes = recognizer.codes.detach().cpu().double()
-        self.register_buffer("codes_t", codes.T.contiguous().to(dtype))
-        self.register_buffer("codes_sqnorm", codes.square().sum(dim=1).to(dtype))
-        self.register_buffer("label_index", torch.searchsorted(values, labels))
-        self.register_buffer("poses", recognizer.poses.detach().cpu().to(dtype))
-
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(B, C, H, W) images → ``(label_index, pose, distance)``, each (B,)."""
-        z = self.projection(x)
-        sq = z.square().sum(dim=1, keepdim=True) - 2 * (z @ self.codes_t) + self.codes_sqnorm
-        best, index = sq.min(dim=1)
-        return self.label_index[index], self.poses[index], best.clamp_min(0).sqrt()
 
 
 class _Graph(nn.Module):
@@ -168,25 +85,44 @@ def _as_module(model: object) -> nn.Module:
     )
 
 
-def _image_shape(module: nn.Module) -> tuple[int, int, int]:
-    shape = getattr(module, "image_shape", None)
-    if shape is None:
-        raise ValueError(
-            f"{type(module).__name__}.image_shape is None: the ONNX graph takes (B, C, H, W) images, "
-            "so the (C, H, W) must be known (fit on images, or pass image_shape)"
-        )
-    c, h, w = (int(v) for v in shape)
-    return c, h, w
+def _input_shape(
+    module: nn.Module, image_shape: object, example_input: object
+) -> tuple[tuple[int, int, int], torch.Tensor | None]:
+    """The (C, H, W) of the graph's images, from ``image_shape``, ``example_input`` or the
+    module's own ``image_shape`` (all that are given must agree), and the example batch
+    (float32, CPU) if given."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    if image_shape is not None:
+        if not isinstance(image_shape, (tuple, list, torch.Size)) or len(image_shape) != 3:
+            raise TypeError(f"image_shape must be None or a (C, H, W) tuple of 3 ints, got {image_shape!r}")
+        shapes["image_shape"] = tuple(check_int(v, "image_shape", minimum=1) for v in image_shape)
+    example = None
+    if example_input is not None:
+        given = check_float_tensor(example_input, "example_input")
+        check_ndim(given, "example_input", (4,), "(B, C, H, W)")
+        if given.shape[0] < 1:
+            raise ValueError(f"example_input must hold at least one image, got shape {tuple(given.shape)}")
+        example = given.detach().to("cpu", torch.float32)
+        shapes["example_input's (C, H, W)"] = tuple(example.shape[1:])
+    if getattr(module, "image_shape", None) is not None or not shapes:
+        shapes[f"{type(module).__name__}.image_shape"] = image_shape_of(module)
+    if len(set(shapes.values())) > 1:
+        raise ValueError("the image shapes differ: " + ", ".join(f"{k}={v}" for k, v in shapes.items()))
+    c, h, w = next(iter(shapes.values()))
+    return (c, h, w), example
 
 
-def _projection_module(module: nn.Module, fold: bool, dtype: torch.dtype) -> nn.Module:
-    """The module to export for a projection: folded for an EigenProjection, else a copy in ``dtype``."""
-    if isinstance(module, EigenProjection) and fold:
-        return FoldedProjection(module, dtype)
-    return copy.deepcopy(module).to(dtype)
+def _sample(shape: tuple[int, int, int], example: torch.Tensor | None) -> torch.Tensor:
+    """The batch the exporter traces: the example, else random images; two rows at least,
+    since torch.export specializes a batch axis of size 1 to a constant."""
+    if example is None:
+        return torch.rand(2, *shape, generator=torch.Generator().manual_seed(0))
+    return example if len(example) >= 2 else example.expand(2, *shape).contiguous()
 
 
-def _prepare(model: object, fold: bool) -> tuple[nn.Module, OnnxModelInfo, tuple[str, ...]]:
+def _prepare(
+    model: object, fold: bool, image_shape: object, example_input: object
+) -> tuple[nn.Module, OnnxModelInfo, tuple[str, ...], torch.Tensor]:
     module = _as_module(model)
     if isinstance(module, NearestNeighborRecognizer):
         recognizer = ExportedRecognizer(module).eval()
@@ -198,18 +134,26 @@ def _prepare(model: object, fold: bool) -> tuple[nn.Module, OnnxModelInfo, tuple
             label_names=tuple(recognizer.label_names),
             module=type(module).__name__,
         )
-        return recognizer, info, RECOGNIZER_OUTPUTS
-    shape = _image_shape(module)
-    n_components = check_int(getattr(module, "n_components", None), f"{type(module).__name__}.n_components")
-    exported = _projection_module(module, fold, torch.float32).eval()
+        shape, example = _input_shape(module.projection, image_shape, example_input)
+        return recognizer, info, RECOGNIZER_OUTPUTS, _sample(shape, example)
+    shape, example = _input_shape(module, image_shape, example_input)
+    exported = projection_module(module, fold, torch.float32).eval()
+    sample = _sample(shape, example)
+    with torch.no_grad():
+        out = exported(sample)
+    if not isinstance(out, torch.Tensor) or out.ndim != 2:
+        got = f"shape {tuple(out.shape)}" if isinstance(out, torch.Tensor) else type(out).__name__
+        raise ValueError(
+            f"{type(module).__name__} must map (B, C, H, W) images to one (B, k) tensor to be exported, got {got}"
+        )
     info = OnnxModelInfo(
         kind="projection",
         image_shape=shape,
-        n_components=n_components,
-        unit_norm=bool(getattr(module, "unit_norm", False)),
+        n_components=int(out.shape[1]),
+        unit_norm=any(getattr(m, "unit_norm", False) is True for m in module.modules()),
         module=type(module).__name__,
     )
-    return exported, info, PROJECTION_OUTPUTS
+    return exported, info, PROJECTION_OUTPUTS, sample
 
 
 def export_onnx(
@@ -218,76 +162,120 @@ def export_onnx(
     *,
     opset_version: int = MIN_OPSET,
     fold: bool = True,
+    image_shape: tuple[int, int, int] | None = None,
+    example_input: torch.Tensor | None = None,
+    dynamo: bool = True,
 ) -> OnnxModelInfo:
-    """Exports a projection or a recognizer to an ONNX file with a dynamic batch axis.
+    """Exports a projection, a recognizer or any module on images to ONNX, with a dynamic batch axis.
 
     Args:
         model: an :class:`EigenProjection`, a :class:`NearestNeighborRecognizer`, any
-            module with ``image_shape`` (C, H, W) and ``n_components`` (e.g. kernel PCA's
-            ``KernelProjection``), or a fitted estimator with ``to_module()``.
+            module mapping (B, C, H, W) images to one (B, k) tensor (kernel PCA's
+            ``KernelProjection``, an ``nn.Sequential`` of a projection and a head), or a
+            fitted estimator with ``to_module()``.
         path: the ``.onnx`` file to write; it is replaced atomically, and carries the
             SHA-256 of its contents (:mod:`torch_eigview.io.onnx_checksum`).
         opset_version: ONNX opset, at least 18.
         fold: export an :class:`EigenProjection` as :class:`FoldedProjection` (default);
             False exports its ``forward`` as written (Sub on the images, then MatMul; with
             ``unit_norm`` onnxruntime's one-pass ReduceL2 then costs some 5e-5 relative
-            error on 128x128 images, see :class:`FoldedProjection`).
+            error on 128x128 images, see :class:`FoldedProjection`). A projection inside
+            another module is exported as written.
+        image_shape: (C, H, W) of the graph's input images; needed when the module has no
+            ``image_shape`` of its own (an ``nn.Sequential``) and no ``example_input`` is given.
+        example_input: (B, C, H, W) example images (B >= 1) to trace with; gives the image
+            shape too. Default: random images of ``image_shape``.
+        dynamo: True (default) uses the torch.export-based exporter; False the
+            TorchScript-based one (the default of ``torch.onnx.export`` before torch 2.9).
 
     Returns:
-        The metadata written into the graph's ``metadata_props``.
+        The metadata written into the graph's ``metadata_props``; ``n_components`` is the
+        width k of the output.
 
     Raises:
-        TypeError: ``model`` is not one of the above, or ``opset_version`` not an integer.
-        ValueError: ``image_shape`` is unknown, ``opset_version`` is below 18, or ``path``
-            cannot be written (a directory, a special file, a missing folder).
+        TypeError: ``model`` is not one of the above, or ``opset_version``, ``image_shape``
+            or ``example_input`` has the wrong type.
+        ValueError: the image shape is unknown or differs between ``image_shape``,
+            ``example_input`` and the module's; the module's output is not (B, k); or
+            ``opset_version`` is below 18; or ``path`` cannot be written (a directory, a
+            special file, a missing folder).
         OSError: the write failed (disk full, file-size limit); ``path`` is unchanged.
+        ImportError: onnx (or, with ``dynamo``, onnxscript) is not installed: the message
+            names ``pip install 'torch_eigview[onnx]'``.
         NotFittedError: ``model`` is an estimator that was not fitted.
     """
+    require("onnx", "onnx", "ONNX export")
     check_output_path(path, "path")
+    if dynamo:
+        require("onnxscript", "onnx", "ONNX export")
     opset_version = check_int(opset_version, "opset_version", minimum=MIN_OPSET)
-    module, info, outputs = _prepare(model, fold)
-    sample = torch.rand(2, *info.image_shape, generator=torch.Generator().manual_seed(0))
-    program = torch.onnx.export(
-        _Graph(module).eval(),
-        (sample,),
-        dynamo=True,
-        dynamic_shapes=({0: torch.export.Dim("batch")},),
-        input_names=[INPUT_NAME],
-        output_names=list(outputs),
-        opset_version=opset_version,
-        verbose=False,
-    )
-    if program is None:  # only with dynamo=False; keeps type checkers informed
-        raise RuntimeError("torch.onnx.export returned no program")
-    program.model.metadata_props.update(info.to_props())
-    _save_verified(program, path)
+    module, info, outputs, sample = _prepare(model, fold, image_shape, example_input)
+    _save_graph(_Graph(module).eval(), sample, outputs, opset_version, dynamo, info.to_props(), path)
     return info
 
 
-def _save_verified(program: Any, path: str | os.PathLike[str]) -> None:
-    """Writes the graph with its checksum trailer, atomically."""
+def _save_graph(
+    graph: nn.Module,
+    sample: torch.Tensor,
+    outputs: tuple[str, ...],
+    opset_version: int,
+    dynamo: bool,
+    props: dict[str, str],
+    path: str | os.PathLike[str],
+) -> None:
+    """Exports ``graph`` traced on ``sample`` with a dynamic batch axis and writes it with ``props``."""
+    names: dict[str, Any] = {
+        "input_names": [INPUT_NAME],
+        "output_names": list(outputs),
+        "opset_version": opset_version,
+    }
+    if dynamo:
+        batch = torch.export.Dim("batch")
+        program = torch.onnx.export(graph, (sample,), dynamo=True, dynamic_shapes=({0: batch},), **names)
+        if program is None:  # only with dynamo=False; keeps type checkers informed
+            raise RuntimeError("torch.onnx.export returned no program")
+        program.model.metadata_props.update(props)
+        with atomic_output(path) as tmp:
+            # One file: weights as external data would escape the checksum and the atomic rename.
+            program.save(tmp, external_data=False)
+            append_checksum(tmp)
+        return
+    onnx = require("onnx", "onnx", "ONNX export")
+    buffer = io.BytesIO()
+    axes = {name: {0: "batch"} for name in (INPUT_NAME, *outputs)}
+    torch.onnx.export(graph, (sample,), buffer, dynamo=False, dynamic_axes=axes, **names)  # type: ignore[arg-type]
+    proto = onnx.load_from_string(buffer.getvalue())
+    onnx.helper.set_model_props(proto, props)
     with atomic_output(path) as tmp:
-        # One file: weights as external data would escape the checksum and the atomic rename.
-        program.save(tmp, external_data=False)
+        onnx.save(proto, tmp)
         append_checksum(tmp)
 
 
 def export_projection(
-    projection: object, path: str | os.PathLike[str], *, opset_version: int = MIN_OPSET, fold: bool = True
+    projection: object,
+    path: str | os.PathLike[str],
+    *,
+    opset_version: int = MIN_OPSET,
+    fold: bool = True,
+    dynamo: bool = True,
 ) -> OnnxModelInfo:
     """Exports a projection: images (B, C, H, W) float32 → coefficients (B, k). See :func:`export_onnx`."""
     if isinstance(projection, NearestNeighborRecognizer):
         projection = projection.projection
-    return export_onnx(projection, path, opset_version=opset_version, fold=fold)
+    return export_onnx(projection, path, opset_version=opset_version, fold=fold, dynamo=dynamo)
 
 
 def export_recognizer(
-    recognizer: NearestNeighborRecognizer, path: str | os.PathLike[str], *, opset_version: int = MIN_OPSET
+    recognizer: NearestNeighborRecognizer,
+    path: str | os.PathLike[str],
+    *,
+    opset_version: int = MIN_OPSET,
+    dynamo: bool = True,
 ) -> OnnxModelInfo:
     """Exports a recognizer: images (B, C, H, W) → label index, pose, distance. See :func:`export_onnx`."""
     if not isinstance(recognizer, NearestNeighborRecognizer):
         raise TypeError(f"recognizer must be a NearestNeighborRecognizer, got {type(recognizer).__name__}")
-    return export_onnx(recognizer, path, opset_version=opset_version)
+    return export_onnx(recognizer, path, opset_version=opset_version, dynamo=dynamo)
 
 
 def read_metadata(path: str | os.PathLike[str]) -> OnnxModelInfo:
@@ -297,8 +285,7 @@ def read_metadata(path: str | os.PathLike[str]) -> OnnxModelInfo:
         ValueError: the file is missing, corrupted (checksum mismatch) or not exported by
             torch_eigview.
     """
-    import onnx
-
+    onnx = require("onnx", "onnx", "read_metadata")
     verify_checksum(path)
     model = onnx.load(os.fspath(path), load_external_data=False)
     props = {p.key: p.value for p in model.metadata_props}
@@ -323,15 +310,14 @@ def compare_with_eager(
         session: an ``onnxruntime.InferenceSession`` to reuse.
 
     Returns:
-        For a projection ``max_rel_err``, ``max |onnx − eager| / max |eager|`` over the
+        For a projection ``max_rel_err``, max |onnx − eager| / max |eager| over the
         coefficients; for a recognizer ``label_agreement`` (the fraction of identical
         labels), ``max_pose_diff`` and ``max_distance_diff``. Distances come from
         ``|z|² − 2 z·g + |g|²`` (as in eager), which cancels near zero: in float32 a true
         distance of 0 reads up to about ``sqrt(1e-7 · |z|²)``, some 1e-4 for unit-norm views.
     """
-    import onnxruntime
-
     if session is None:
+        onnxruntime = require("onnxruntime", "onnx", "compare_with_eager")
         verify_checksum(path)
         session = onnxruntime.InferenceSession(os.fspath(path), providers=["CPUExecutionProvider"])
     x = images.detach().cpu().float()

@@ -5,20 +5,63 @@ holds the ``unit_norm`` flag and the optional ``image_shape`` (saved in ``state_
 extra state, since they are not tensors), the ``eigenvalues`` buffer, the input check and
 ``prepare``. Each subclass registers its own buffers and defines ``in_features``,
 ``n_components`` and ``_project``.
+
+Both layers are built either from sizes, with zero buffers for ``load_state_dict`` to fill
+(as torchvision's ``FrozenBatchNorm2d``), or from tensors (``from_tensors``);
+:func:`is_size` tells the two call forms apart and :func:`check_sizes` checks the first.
 """
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
-from torch_eigview.check import check_finite, check_float_tensor, check_image_shape, check_view_input
+from torch_eigview.check import (
+    check_finite,
+    check_float_tensor,
+    check_image_shape,
+    check_int,
+    check_view_input,
+)
 from torch_eigview.nn.functional import unit_rows
 
-__all__ = ["FrozenProjection", "check_all_finite", "check_eigenvalues", "check_same_dtype"]
+__all__ = [
+    "FrozenProjection",
+    "check_all_finite",
+    "check_eigenvalues",
+    "check_same_dtype",
+    "check_sizes",
+    "is_size",
+]
+
+# ``nn.Module`` saves ``get_extra_state()`` under ``prefix + "_extra_state"``.
+_EXTRA_STATE_KEY = "_extra_state"
+
+
+def is_size(value: object) -> bool:
+    """Whether a constructor's first argument is a size (an integer, the sizes form) rather
+    than a tensor (the tensor form)."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def check_sizes(sizes: Sequence[tuple[object, str]], eigenvalues: object) -> list[int]:
+    """The named sizes of the sizes form, each an integer >= 1.
+
+    Raises:
+        TypeError: a size is not an integer, or ``eigenvalues`` are given (they come with
+            the tensors, or from the loaded ``state_dict``).
+        ValueError: a size is below 1.
+    """
+    if eigenvalues is not None:
+        raise TypeError(
+            "eigenvalues must be None when the layer is built from sizes (they come from the "
+            f"loaded state_dict); got {type(eigenvalues).__name__}: pass tensors to from_tensors instead"
+        )
+    return [check_int(value, name, minimum=1) for value, name in sizes]
 
 
 def check_eigenvalues(
@@ -88,6 +131,11 @@ class FrozenProjection(nn.Module):
         # A copy, so that later in-place edits of the caller's tensor cannot reach the layer.
         self.register_buffer("eigenvalues", eigenvalues.detach().clone().to(device))
 
+    def _convert(self, dtype: torch.dtype | None, device: torch.device | str | None) -> None:
+        """Moves the buffers to the constructor's ``dtype`` and ``device`` when given."""
+        if dtype is not None or device is not None:
+            self.to(device=device, dtype=dtype)
+
     def _check_views(self, x: torch.Tensor) -> None:
         # Every floating buffer has one dtype (checked at construction; .to() casts them together).
         check_view_input(x, self.in_features, self.image_shape, self.eigenvalues.dtype)
@@ -127,6 +175,22 @@ class FrozenProjection(nn.Module):
             what = f"key {keys[0]!r}" if len(keys) == 1 else f"keys {sorted(keys)}"
             raise ValueError(f"extra state must be a dict with {what}, got {state!r}")
         self._restore(state)
+
+    def _save_to_state_dict(self, destination: dict[str, Any], prefix: str, keep_vars: bool) -> None:
+        super()._save_to_state_dict(destination, prefix, keep_vars)
+        if torch.onnx.is_in_onnx_export():
+            # The TorchScript exporter (torch.onnx.export's default before torch 2.9) calls
+            # .detach() on every state_dict value (torch.jit._unique_state_dict), and the
+            # settings are not tensors; the graph holds what they decide as constants anyway.
+            destination.pop(prefix + _EXTRA_STATE_KEY, None)
+
+    def _load_from_state_dict(self, state_dict: dict[str, Any], prefix: str, *args: Any) -> None:
+        # Eigenvalues are optional: (k,) when known, (0,) when not. A layer built from sizes
+        # cannot know which the saved one had, so its buffer takes either shape.
+        incoming = state_dict.get(prefix + "eigenvalues")
+        if isinstance(incoming, torch.Tensor) and tuple(incoming.shape) in {(0,), (self.n_components,)}:
+            self.eigenvalues = self.eigenvalues.new_empty(incoming.shape)
+        super()._load_from_state_dict(state_dict, prefix, *args)
 
     def _restore(self, state: dict[str, Any]) -> None:
         """Sets the attributes from a checked extra state; subclasses restore theirs first."""

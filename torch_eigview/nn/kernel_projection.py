@@ -24,7 +24,14 @@ from torch_eigview.check import (
     check_kernel_params,
     check_ndim,
 )
-from torch_eigview.nn._frozen import FrozenProjection, check_all_finite, check_eigenvalues, check_same_dtype
+from torch_eigview.nn._frozen import (
+    FrozenProjection,
+    check_all_finite,
+    check_eigenvalues,
+    check_same_dtype,
+    check_sizes,
+    is_size,
+)
 
 __all__ = ["KERNELS", "KernelProjection", "pairwise_kernel"]
 
@@ -84,30 +91,44 @@ class KernelProjection(FrozenProjection):
     exported graph. Only the named kernels are supported: a callable kernel could neither
     be exported nor saved in a ``state_dict``, so ``KernelEigenspace.to_module`` refuses it.
 
+    Built from sizes (T, N, k), the buffers start as zeros for ``load_state_dict`` to fill,
+    and the kernel, its parameters, ``image_shape`` and ``unit_norm`` come back from the
+    saved extra state. :meth:`from_tensors` builds the layer from a fit's tensors; passing
+    them here in place of the sizes does the same.
+
     Args:
-        vectors: (T, N) stored views, N = C*H*W.
-        coefficients: (T, k) map from a centred kernel row to coordinates.
-        kernel_mean: (T,) mean over the training views of their kernel rows against V.
+        n_vectors: T, the number of stored views; or the (T, N) stored views V, N = C*H*W
+            (the tensor form).
+        n_features: N; or the (T, k) coefficients A (the tensor form).
+        n_components: k; or the (T,) mean kernel row k̄ of the training views against V
+            (the tensor form).
         kernel: one of "rbf", "poly", "cosine", "linear".
         gamma: γ of rbf and poly, > 0; None means 1/N.
         degree: degree of poly, int >= 1.
         coef0: c0 of poly.
-        eigenvalues: optional (k,) eigenvalues of the centred kernel matrix (kept for
-            reference; an empty (0,) buffer when omitted).
+        eigenvalues: tensor form only: optional (k,) eigenvalues of the centred kernel
+            matrix (kept for reference; an empty (0,) buffer when omitted).
         image_shape: (C, H, W) of a view, or None (saved as extra state).
         unit_norm: divide each input view by its L2 norm first (the views fitted must
             then have been unit-norm too), as in ``EigenProjection``.
+        dtype: dtype of the buffers (default: the tensors', or torch's default for sizes).
+        device: device of the buffers (default: the tensors', or the CPU for sizes).
 
     Raises:
-        TypeError: a tensor argument is not a floating tensor, dtypes differ, or the
-            kernel is not a str.
-        ValueError: inconsistent shapes, non-finite values, an unknown kernel or bad
-            kernel parameters.
+        TypeError: a size is not an integer, a tensor argument is not a floating tensor,
+            dtypes differ, the kernel is not a str, or eigenvalues are given with sizes.
+        ValueError: a size below 1, inconsistent shapes, non-finite values, an unknown
+            kernel or bad kernel parameters.
 
     Example:
-        >>> m = KernelProjection(torch.eye(4), torch.ones(4, 2) / 4, torch.full((4,), 0.25), "linear")
+        >>> vectors, coefficients = torch.eye(4), torch.ones(4, 2) / 4
+        >>> m = KernelProjection.from_tensors(vectors, coefficients, torch.full((4,), 0.25), kernel="linear")
         >>> m(torch.ones(3, 4)).shape
         torch.Size([3, 2])
+        >>> fresh = KernelProjection(4, 4, 2)
+        >>> _ = fresh.load_state_dict(m.state_dict())
+        >>> fresh.kernel
+        'linear'
     """
 
     vectors: torch.Tensor
@@ -125,9 +146,9 @@ class KernelProjection(FrozenProjection):
 
     def __init__(
         self,
-        vectors: torch.Tensor,
-        coefficients: torch.Tensor,
-        kernel_mean: torch.Tensor,
+        n_vectors: int | torch.Tensor,
+        n_features: int | torch.Tensor,
+        n_components: int | torch.Tensor,
         kernel: str = "rbf",
         gamma: float | None = None,
         degree: int = 3,
@@ -135,6 +156,9 @@ class KernelProjection(FrozenProjection):
         eigenvalues: torch.Tensor | None = None,
         image_shape: tuple[int, int, int] | None = None,
         unit_norm: bool = False,
+        *,
+        dtype: torch.dtype | None = None,
+        device: torch.device | str | None = None,
     ) -> None:
         if callable(kernel) and not isinstance(kernel, str):
             raise TypeError(
@@ -145,12 +169,45 @@ class KernelProjection(FrozenProjection):
         gamma, degree, coef0 = check_kernel_params(gamma, degree, coef0)
         super().__init__(unit_norm)
         self.kernel, self.degree, self.coef0 = kernel, degree, coef0
+        tensors: tuple[torch.Tensor, ...]
+        if is_size(n_vectors):
+            sizes = [(n_vectors, "n_vectors"), (n_features, "n_features"), (n_components, "n_components")]
+            t, n, k = check_sizes(sizes, eigenvalues)
+            tensors = (torch.zeros(t, n), torch.zeros(t, k), torch.zeros(t))
+        else:
+            values, names = (n_vectors, n_features, n_components), ("vectors", "coefficients", "kernel_mean")
+            tensors = tuple(check_float_tensor(v, name) for v, name in zip(values, names, strict=True))
+        self._register(tensors, eigenvalues)
+        self.gamma = 1.0 / self.in_features if gamma is None else gamma
+        self.image_shape = check_image_shape(image_shape, self.in_features, "image_shape")
+        self._convert(dtype, device)
+
+    @classmethod
+    def from_tensors(
+        cls, vectors: torch.Tensor, coefficients: torch.Tensor, kernel_mean: torch.Tensor, **options: Any
+    ) -> KernelProjection:
+        """The layer holding copies of a kernel fit's tensors.
+
+        Args:
+            vectors: (T, N) stored views.
+            coefficients: (T, k) map from a centred kernel row to coordinates.
+            kernel_mean: (T,) mean kernel row of the training views against ``vectors``.
+            **options: the class's keyword arguments (``kernel``, ``gamma``, ``degree``,
+                ``coef0``, ``eigenvalues``, ``image_shape``, ``unit_norm``, ``dtype``, ``device``).
+
+        Raises:
+            TypeError, ValueError: as for the class.
+        """
+        return cls(check_float_tensor(vectors, "vectors"), coefficients, kernel_mean, **options)
+
+    def _register(self, tensors: tuple[torch.Tensor, ...], eigenvalues: torch.Tensor | None) -> None:
+        """Checks (vectors, coefficients, kernel_mean) against each other and registers copies."""
+        vectors, coefficients, kernel_mean = tensors
         for tensor, name, layout, ndim in (
             (vectors, "vectors", "(T, N)", 2),
             (coefficients, "coefficients", "(T, k)", 2),
             (kernel_mean, "kernel_mean", "(T,)", 1),
         ):
-            check_float_tensor(tensor, name)
             check_ndim(tensor, name, (ndim,), layout)
         n_vectors, n_features = vectors.shape
         if n_vectors < 1 or n_features < 1 or coefficients.shape[1] < 1:
@@ -168,8 +225,6 @@ class KernelProjection(FrozenProjection):
         others = [(coefficients, "coefficients"), (kernel_mean, "kernel_mean"), (eigenvalues, "eigenvalues")]
         check_same_dtype(others, vectors, "vectors")
         check_all_finite([(vectors, "vectors"), *others])
-        self.gamma = 1.0 / n_features if gamma is None else gamma
-        self.image_shape = check_image_shape(image_shape, n_features, "image_shape")
         vectors = vectors.detach().clone(memory_format=torch.contiguous_format)
         self.register_buffer("vectors", vectors)
         self.register_buffer(

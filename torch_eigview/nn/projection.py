@@ -11,7 +11,14 @@ from __future__ import annotations
 import torch
 
 from torch_eigview.check import check_float_tensor, check_image_shape, check_ndim
-from torch_eigview.nn._frozen import FrozenProjection, check_all_finite, check_eigenvalues, check_same_dtype
+from torch_eigview.nn._frozen import (
+    FrozenProjection,
+    check_all_finite,
+    check_eigenvalues,
+    check_same_dtype,
+    check_sizes,
+    is_size,
+)
 
 __all__ = ["EigenProjection"]
 
@@ -23,27 +30,43 @@ class EigenProjection(FrozenProjection):
     the module has no parameters. Inputs must have the buffers' dtype: convert the module
     with ``.to(dtype)`` or ``.double()`` rather than relying on implicit casts.
 
+    Built from sizes, as torchvision's ``FrozenBatchNorm2d``, the buffers start as zeros
+    (eigenvalues unknown) for ``load_state_dict`` to fill; the saved ``image_shape`` and
+    ``unit_norm`` come back with them (extra state), and the saved eigenvalues may be (k,)
+    or unknown. :meth:`from_tensors` builds the layer from a fit's tensors; passing them here
+    in place of the sizes, ``EigenProjection(mean, components, ...)``, does the same.
+
     Args:
-        mean: (N,) the mean view, N = C*H*W (row-major flatten of (C, H, W)).
-        components: (k, N) orthonormal eigenvectors, one per row.
-        eigenvalues: (k,) eigenvalues of the centred scatter matrix, as in
-            ``Eigenspace.eigenvalues_``. Optional; when omitted the buffer is an empty
-            (0,) tensor, meaning "unknown" (the projection never uses it).
+        n_features: N = C*H*W, the number of values in one view (row-major flatten of
+            (C, H, W)); or the (N,) mean view (the tensor form).
+        n_components: k, the number of eigenvectors; or the (k, N) components (the
+            tensor form).
+        eigenvalues: tensor form only: (k,) eigenvalues of the centred scatter matrix, as
+            in ``Eigenspace.eigenvalues_``, or None ("unknown": an empty (0,) buffer; the
+            projection never uses it).
         image_shape: (C, H, W) of a view, or None. With it, ``reconstruct`` returns images.
             It is saved in ``state_dict`` as extra state, so loading restores it.
         unit_norm: divide each input view by its L2 norm before projecting (the brightness
             normalization of Murase and Nayar's appearance eigenspaces); the eigenspace
             must then have been fitted on unit-norm views. Saved as extra state too.
+        dtype: dtype of the buffers (default: the tensors', or torch's default dtype for
+            sizes); load a float64 layer's ``state_dict`` into a float64 one to keep it exact.
+        device: device of the buffers (default: the tensors', or the CPU for sizes).
 
     Raises:
-        TypeError: a tensor argument is not a floating tensor, or the dtypes differ.
-        ValueError: shapes are inconsistent, values are not finite, or ``image_shape``
-            does not multiply to N.
+        TypeError: a size is not an integer; a tensor argument is not a floating tensor,
+            or the dtypes differ; eigenvalues given with sizes.
+        ValueError: a size is below 1, shapes are inconsistent, values are not finite, or
+            ``image_shape`` does not multiply to N.
 
     Example:
-        >>> m = EigenProjection(torch.zeros(6), torch.eye(6)[:2], image_shape=(1, 2, 3))
-        >>> m(torch.ones(4, 1, 2, 3)).shape
+        >>> fitted = EigenProjection.from_tensors(torch.zeros(6), torch.eye(6)[:2], image_shape=(1, 2, 3))
+        >>> fitted(torch.ones(4, 1, 2, 3)).shape
         torch.Size([4, 2])
+        >>> fresh = EigenProjection(6, 2)
+        >>> _ = fresh.load_state_dict(fitted.state_dict())
+        >>> fresh
+        EigenProjection(in_features=6, n_components=2, image_shape=(1, 2, 3))
     """
 
     mean: torch.Tensor
@@ -51,15 +74,55 @@ class EigenProjection(FrozenProjection):
 
     def __init__(
         self,
+        n_features: int | torch.Tensor,
+        n_components: int | torch.Tensor,
+        eigenvalues: torch.Tensor | None = None,
+        image_shape: tuple[int, int, int] | None = None,
+        unit_norm: bool = False,
+        *,
+        dtype: torch.dtype | None = None,
+        device: torch.device | str | None = None,
+    ) -> None:
+        super().__init__(unit_norm)
+        if is_size(n_features):
+            n, k = check_sizes([(n_features, "n_features"), (n_components, "n_components")], eigenvalues)
+            mean, components = torch.zeros(n), torch.zeros(k, n)
+        else:
+            mean = check_float_tensor(n_features, "mean")
+            components = check_float_tensor(n_components, "components")
+        self._register(mean, components, eigenvalues, image_shape)
+        self._convert(dtype, device)
+
+    @classmethod
+    def from_tensors(
+        cls,
         mean: torch.Tensor,
         components: torch.Tensor,
         eigenvalues: torch.Tensor | None = None,
         image_shape: tuple[int, int, int] | None = None,
         unit_norm: bool = False,
+    ) -> EigenProjection:
+        """The layer holding copies of a fit's tensors.
+
+        Args:
+            mean: (N,) the mean view.
+            components: (k, N) orthonormal eigenvectors, one per row, of ``mean``'s dtype.
+            eigenvalues: optional (k,) eigenvalues (see the class).
+            image_shape, unit_norm: as for the class.
+
+        Raises:
+            TypeError, ValueError: as for the class.
+        """
+        return cls(check_float_tensor(mean, "mean"), components, eigenvalues, image_shape, unit_norm)
+
+    def _register(
+        self,
+        mean: torch.Tensor,
+        components: torch.Tensor,
+        eigenvalues: torch.Tensor | None,
+        image_shape: tuple[int, int, int] | None,
     ) -> None:
-        super().__init__(unit_norm)
-        check_float_tensor(mean, "mean")
-        check_float_tensor(components, "components")
+        """Checks the tensors against each other and registers copies as buffers."""
         check_ndim(mean, "mean", (1,), "(N,)")
         check_ndim(components, "components", (2,), "(k, N)")
         n_components, n_features = components.shape
