@@ -322,7 +322,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             from torch_eigview.apps.predict import run
 
             return run(args)
-    except (ValueError, OSError, ImportError) as exc:  # OSError: an output that failed to write (disk full); ImportError: a missing extra, whose message names the pip install
+    except (
+        ValueError,
+        OSError,
+        ImportError,
+    ) as exc:  # OSError: an output that failed to write (disk full); ImportError: a missing extra, whose message names the pip install
         parser.exit(2, f"eigview: error: {exc}\n")
     return 1
 

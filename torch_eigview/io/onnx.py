@@ -310,7 +310,7 @@ def compare_with_eager(
         session: an ``onnxruntime.InferenceSession`` to reuse.
 
     Returns:
-        For a projection ``max_rel_err``, max |onnx − eager| / max |eager| over the
+        For a projection ``max_rel_err``, ``max |onnx − eager| / max |eager|`` over the
         coefficients; for a recognizer ``label_agreement`` (the fraction of identical
         labels), ``max_pose_diff`` and ``max_distance_diff``. Distances come from
         ``|z|² − 2 z·g + |g|²`` (as in eager), which cancels near zero: in float32 a true
