@@ -139,5 +139,5 @@ def test_pyproject_extras() -> None:
     assert extras["onnx"] == {"onnx", "onnxruntime", "onnxscript"}
     assert extras["plot"] == {"matplotlib"} and extras["sklearn"] == {"scikit-learn"}
     assert {"torch_eigview", "pytest", "hypothesis", "ruff", "mypy"} <= extras["test"]
-    assert "torch_eigview[onnx,sklearn]" in project["optional-dependencies"]["test"]
+    assert "torch_eigview[onnx,sklearn,docs]" in project["optional-dependencies"]["test"]
     assert project["optional-dependencies"]["all"] == ["torch_eigview[onnx,plot,sklearn]"]
