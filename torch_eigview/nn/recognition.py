@@ -65,6 +65,8 @@ class NearestNeighborRecognizer(nn.Module):
     labels: torch.Tensor
     poses: torch.Tensor
     codes_sqnorm: torch.Tensor
+    pose_before: torch.Tensor
+    pose_after: torch.Tensor
 
     def __init__(
         self,
