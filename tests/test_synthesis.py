@@ -20,6 +20,7 @@ from torch_eigview.synthesis import (
     PairGeometry,
     SynthesisOptions,
     SynthesizedViews,
+    pair_geometry,
     pair_of,
     synthesize_views,
 )
@@ -314,3 +315,12 @@ def test_synthesize_errors(
 ) -> None:
     with pytest.raises(error, match=match):
         synthesize_views(seeds, alpha, thetas, PLAIN)
+
+
+def test_auto_elevation_falls_back_to_zero_without_a_fit() -> None:
+    """Seeds with no foreground leave nothing to fit the tilt to: the untilted camera, not an error."""
+    seeds = torch.zeros(2, 1, 12, 12)
+    geometry = pair_geometry(seeds, 10.0, SynthesisOptions(elevation="auto"))
+    assert [g.elevation for g in geometry] == [0.0]
+    out = synthesize_views(seeds, 10.0, [5.0], SynthesisOptions(elevation="auto"), geometry)
+    assert out.elevations == [0.0] and bool((out.views == 0).all())

@@ -260,12 +260,22 @@ def pair_geometry(
         )
         elevation = opts.elevation
         if elevation == "auto":
-            mask = foreground_mask(v1, opts.background)
-            elevation = float(estimate_elevation(corr, steps[n], center=opts.center, mask=mask)[0])
-            if not math.isfinite(elevation):
-                elevation = 0.0
+            elevation = _measured_elevation(corr, steps[n], foreground_mask(v1, opts.background), opts.center)
         out.append(PairGeometry(corr, float(elevation), time.perf_counter() - t0))
     return out
+
+
+def _measured_elevation(
+    corr: Correspondence, alpha: float, mask: torch.Tensor, center: float | None
+) -> float:
+    """The pair's elevation fit, or 0 (the untilted camera) where the flow gives none: no
+    trusted correspondence, a non-finite fit, or a saturated one (|sin| >= 1, ±90°, where
+    the vertical flow is not a tilt's: the warp takes only (−90°, 90°))."""
+    try:
+        elevation = float(estimate_elevation(corr, alpha, center=center, mask=mask)[0])
+    except ValueError:
+        return 0.0
+    return elevation if math.isfinite(elevation) and abs(elevation) < 90 else 0.0
 
 
 def synthesize_views(

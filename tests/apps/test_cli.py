@@ -43,7 +43,15 @@ def small_run(coil_root: Path, tmp_path_factory: pytest.TempPathFactory) -> dict
 def test_run_writes_json(small_run: dict[str, object]) -> None:
     assert small_run["status"] == 0
     record = json.loads(Path(small_run["json"]).read_text())  # type: ignore[arg-type]
-    assert set(record) == {"accuracy", "per_object", "pose_mae_deg", "n_test", "n_train_views", "seconds"}
+    assert set(record) == {
+        "accuracy",
+        "per_object",
+        "pose_mae_deg",
+        "pose_error_deg",
+        "n_test",
+        "n_train_views",
+        "seconds",
+    }
     assert set(record["per_object"]) == {"1", "2"}
     assert record["n_test"] == 2 * 5
     assert record["n_train_views"] == 2 * 4

@@ -16,7 +16,7 @@ from torch_eigview.synthesis import SynthesisOptions
 OBJECTS = [1, 2, 3]
 ALPHA = 10.0
 TEST = (-10.0, 10.0)
-JSON_KEYS = {"accuracy", "per_object", "pose_mae_deg", "n_test", "n_train_views", "seconds"}
+JSON_KEYS = {"accuracy", "per_object", "pose_mae_deg", "pose_error_deg", "n_test", "n_train_views", "seconds"}
 SECONDS_KEYS = {"correspondence", "synthesis", "eigen", "recognition", "total"}
 
 # Short ranges and 3 components keep the whole module at a few seconds; elevation 0 skips

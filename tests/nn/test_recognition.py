@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from torch_eigview.nn.projection import EigenProjection
-from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
+from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition, pose_neighbours
 
 IMAGE_SHAPE = (1, 4, 6)
 N_FEATURES = 24
@@ -250,3 +250,63 @@ def test_nan_pose_is_rejected() -> None:
     args["poses"] = torch.tensor([0.0, float("nan"), 10.0, 15.0], dtype=torch.float64)
     with pytest.raises(ValueError, match="poses must be finite"):
         NearestNeighborRecognizer(**args)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- pose interpolation
+def circle_recognizer(
+    step: float, stop: float, dtype: torch.dtype = torch.float64
+) -> NearestNeighborRecognizer:
+    """One object whose codes trace the unit circle (cos θ, sin θ) at poses 0, step, … < stop."""
+    poses = torch.arange(0.0, stop, step, dtype=torch.float64)
+    codes = torch.stack([torch.cos(torch.deg2rad(poses)), torch.sin(torch.deg2rad(poses))], dim=1)
+    projection = EigenProjection(torch.zeros(2, dtype=dtype), torch.eye(2, dtype=dtype))
+    return NearestNeighborRecognizer(
+        projection, codes.to(dtype), torch.zeros(len(poses), dtype=torch.long), poses.to(dtype)
+    )
+
+
+def on_circle(degrees: list[float]) -> torch.Tensor:
+    rad = torch.deg2rad(torch.tensor(degrees, dtype=torch.float64))
+    return torch.stack([torch.cos(rad), torch.sin(rad)], dim=1)
+
+
+@DTYPES
+def test_interpolated_pose_between_gallery_views(dtype: torch.dtype) -> None:
+    """On a closed manifold the pose lands between the gallery views, both ways round."""
+    rec = circle_recognizer(10.0, 360.0, dtype)
+    truth = [23.0, 27.0, 2.0, 357.0, 181.0]
+    x = on_circle(truth).to(dtype)
+    nearest = rec.predict(x)
+    assert nearest.poses.tolist() == [20.0, 30.0, 0.0, 0.0, 180.0]
+    refined = rec.predict(x, interpolate_pose=True).poses
+    err = torch.remainder(refined.double() - torch.tensor(truth, dtype=torch.float64) + 180, 360) - 180
+    # A chord of a 10-degree arc: the fraction along it is within 0.05 degrees of the angle's.
+    assert float(err.abs().max()) < 0.05
+    assert refined.dtype == dtype
+    torch.testing.assert_close(rec.predict(x, interpolate_pose=True).labels, nearest.labels)
+
+
+def test_interpolated_pose_keeps_gallery_poses_and_open_ends() -> None:
+    """A gallery view's own code keeps its pose; an open arc does not wrap round."""
+    rec = circle_recognizer(10.0, 100.0)  # 0..90: open, 270 degrees from 90 round to 0
+    assert rec.pose_before.tolist()[0] == 0 and rec.pose_after.tolist()[-1] == 9
+    refined = rec.predict(rec.codes, interpolate_pose=True).poses
+    torch.testing.assert_close(refined, rec.poses, atol=1e-9, rtol=0)
+    beyond = rec.predict(on_circle([-5.0, 95.0]), interpolate_pose=True).poses
+    assert beyond.tolist() == [0.0, 90.0]  # clamped to the arc's ends
+
+
+def test_pose_neighbours_per_label_and_loop_rule() -> None:
+    labels = torch.tensor([1, 0, 1, 0, 1, 0])
+    poses = torch.tensor([180.0, 0.0, 0.0, 350.0, 90.0, 10.0])
+    before, after = pose_neighbours(labels, poses)
+    # Label 0 at 0, 10, 350: gaps 10 and 340; round from 350 to 0 is 10 <= 1.5 * 340: a loop.
+    assert (before[1], after[1]) == (3, 5) and (before[3], after[3]) == (5, 1)
+    # Label 1 at 0, 90, 180: round from 180 to 0 is 180 > 1.5 * 90: open ends.
+    assert (before[2], after[2]) == (2, 4) and (before[0], after[0]) == (4, 0)
+
+
+def test_interpolate_pose_must_be_bool() -> None:
+    rec = circle_recognizer(10.0, 360.0)
+    with pytest.raises(TypeError, match="interpolate_pose must be a bool, got str"):
+        rec.predict(on_circle([1.0]), interpolate_pose="yes")  # type: ignore[arg-type]

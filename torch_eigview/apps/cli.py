@@ -79,9 +79,38 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100); default: coil-20-proc/ in "
         "$TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc beside the checkout",
     )
-    coil.add_argument("--alpha", type=float, required=True, help="angle between seed views, degrees")
+    coil.add_argument(
+        "--alpha",
+        type=float,
+        default=None,
+        help="angle between seed views, degrees (required without --seeds)",
+    )
     coil.add_argument("--center", type=float, default=0.0, help="pose of the first seed view, degrees")
-    coil.add_argument("--views", type=int, default=2, choices=(2, 3), help="seed views per object")
+    coil.add_argument(
+        "--views", type=int, default=None, choices=(2, 3), help="seed views per object (default 2)"
+    )
+    coil.add_argument(
+        "--seeds",
+        type=int,
+        default=None,
+        metavar="M",
+        help="the full circle: M seed views 360/M degrees apart from --center, every sector synthesized, "
+        "every other pose tested (instead of --alpha and --views)",
+    )
+    coil.add_argument(
+        "--pose",
+        choices=("nearest", "interpolate"),
+        default="nearest",
+        help="the reported pose: the nearest gallery view's, or interpolated on the appearance "
+        "manifold between it and its neighbours (Murase and Nayar); default nearest",
+    )
+    coil.add_argument(
+        "--dense-step",
+        type=float,
+        default=None,
+        metavar="S",
+        help="with --seeds and --method dense: real views every S degrees (default about 180/M)",
+    )
     coil.add_argument(
         "--synth",
         type=float,
@@ -218,6 +247,29 @@ def format_table(result: CoilResult, title: str) -> str:
     return "\n".join(lines)
 
 
+def _check_circle_flags(args: argparse.Namespace) -> None:
+    """The flag combinations of the full circle that need no folder to refuse."""
+    if args.seeds is None:
+        if args.alpha is None:
+            raise ValueError("--alpha is required (the angle between seed views), unless --seeds is given")
+        if args.dense_step is not None:
+            raise ValueError(f"--dense-step {args.dense_step:g} needs --seeds (the full circle)")
+        return
+    if args.seeds < 2:
+        raise ValueError(f"--seeds={args.seeds} must be >= 2")
+    if args.views is not None:
+        raise ValueError(
+            f"--seeds {args.seeds} places its own seed views: it cannot take --views {args.views}"
+        )
+    if args.alpha is not None and abs(args.alpha - 360.0 / args.seeds) > 1e-9:
+        raise ValueError(
+            f"--alpha {args.alpha:g} contradicts --seeds {args.seeds} (seeds 360/{args.seeds} = "
+            f"{360.0 / args.seeds:g} degrees apart); leave --alpha out"
+        )
+    if args.dense_step is not None and args.method != "dense":
+        raise ValueError(f"--dense-step {args.dense_step:g} needs --method dense, got --method {args.method}")
+
+
 def _run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.apps.experiment import CoilExperiment
     from torch_eigview.datasets.coil import CoilFolder, find_coil_root
@@ -226,10 +278,11 @@ def _run_coil(args: argparse.Namespace) -> int:
 
     check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
     folder = CoilFolder(find_coil_root(args.root))
+    _check_circle_flags(args)
     experiment = CoilExperiment(
-        alpha=args.alpha,
+        alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
         center=args.center,
-        views=args.views,
+        views=args.views or 2,
         synth=tuple(args.synth),
         test=tuple(args.test),
         components=args.components,
@@ -245,11 +298,21 @@ def _run_coil(args: argparse.Namespace) -> int:
         ),
         kernel=args.kernel,
         gamma=args.gamma,
+        seeds=args.seeds,
+        dense_step=args.dense_step,
+        interpolate_pose=args.pose == "interpolate",
     )
+    if args.seeds is not None:
+        experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
     if args.kernel and args.save:
         raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
     result = experiment.run(folder, progress=progress_bar(args.quiet, f"{args.method} objects", "obj"))
-    title = f"COIL {args.method}: alpha={args.alpha:g}, {args.views} seed views, center={args.center:g}"
+    if args.seeds is None:
+        title = (
+            f"COIL {args.method}: alpha={args.alpha:g}, {experiment.views} seed views, center={args.center:g}"
+        )
+    else:
+        title = f"COIL {args.method}: full circle, {args.seeds} seed views from center={args.center:g}"
     if args.kernel:
         title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
     print(format_table(result, title))

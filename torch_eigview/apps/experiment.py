@@ -16,6 +16,12 @@ interpolate 15°..20°, where the first pair's extrapolation is as good, and the
 view would bring no coverage. The step stays, so the gallery grows with the span (41
 views per object for two seeds at 1° steps, 41 + α for three), as the paper's SOIL
 experiment grows it with 2α.
+
+With ``seeds`` = M the experiment goes round the whole turntable instead
+(:mod:`torch_eigview.apps.circle`): M seed views 360°/M apart from ``center``, every
+sector synthesized (every ``synth`` step), one eigenspace, and every available pose that
+holds no real gallery view tested; ``sparse`` is the M seeds alone and ``dense`` the real
+views every ``dense_step`` degrees.
 """
 
 from __future__ import annotations
@@ -27,8 +33,9 @@ from dataclasses import dataclass, field
 
 import torch
 
+from torch_eigview.apps.circle import CircleLayout, circle_layout, synthesize_circle
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
-from torch_eigview.check import check_alpha, check_n_components
+from torch_eigview.check import check_alpha, check_int, check_n_components
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
@@ -51,12 +58,21 @@ class CoilResult:
     seconds: dict[str, float]
     recognizer: NearestNeighborRecognizer
     elevations: dict[int, list[float]] = field(default_factory=dict)
+    pose_median_deg: float = math.nan
 
     def to_json(self) -> dict[str, object]:
+        """The record: accuracy, per_object, n_test, n_train_views, seconds, and the pose
+        error of the correctly recognized views (``pose_mae_deg`` and ``pose_error_deg``
+        with its mean and median; null when no view is recognized)."""
+
+        def finite(value: float) -> float | None:
+            return value if math.isfinite(value) else None
+
         return {
             "accuracy": self.accuracy,
             "per_object": {str(k): v for k, v in self.per_object.items()},
-            "pose_mae_deg": self.pose_mae_deg if math.isfinite(self.pose_mae_deg) else None,
+            "pose_mae_deg": finite(self.pose_mae_deg),
+            "pose_error_deg": {"mean": finite(self.pose_mae_deg), "median": finite(self.pose_median_deg)},
             "n_test": self.n_test,
             "n_train_views": self.n_train_views,
             "seconds": self.seconds,
@@ -87,6 +103,15 @@ class CoilExperiment:
             (views − 2)·α on the side the seeds extend to (the stop for α > 0, the start
             for α < 0), so that the range keeps its margins beyond the first and the last
             seed; False takes ``synth`` as it is whatever the number of views.
+        seeds: None, or M >= 2 for the full circle (M seed views 360°/M apart from
+            ``center``; ``views``, ``alpha``'s value and the ranges other than ``synth``'s
+            step are then unused; ``views`` must stay 2).
+        dense_step: the full circle's ``dense`` step in degrees (default: the largest multiple
+            of the poses' step up to 180/M, about 2M real views).
+        interpolate_pose: score the pose interpolated on the appearance manifold between
+            the nearest gallery view and its neighbours
+            (:meth:`~torch_eigview.nn.recognition.NearestNeighborRecognizer.interpolate_poses`),
+            not the nearest view's pose.
     """
 
     alpha: float = 5.0
@@ -102,14 +127,18 @@ class CoilExperiment:
     kernel: str | None = None
     gamma: float | str | None = None
     synth_follows_seeds: bool = True
+    seeds: int | None = None
+    dense_step: float | None = None
+    interpolate_pose: bool = False
 
     def __post_init__(self) -> None:
         if self.kernel is not None:
             KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)  # validates both
         elif self.gamma is not None:
             raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
-        check_alpha(self.alpha)
-        if abs(self.alpha) * (self.views - 1) >= 180:
+        if self.seeds is None:  # the full circle sets its own angles
+            check_alpha(self.alpha)
+        if self.seeds is None and abs(self.alpha) * (self.views - 1) >= 180:
             raise ValueError(f"alpha={self.alpha} with {self.views} seed views spans 180 degrees or more")
         check_n_components(self.components)
         if len(self.synth) != 3:
@@ -124,6 +153,17 @@ class CoilExperiment:
         if not isinstance(self.synth_follows_seeds, bool):
             raise TypeError(f"synth_follows_seeds must be a bool, got {self.synth_follows_seeds!r}")
         angle_range(self.test[0], self.test[1], 5.0, name="test")
+        if self.seeds is not None:
+            check_int(self.seeds, "seeds", minimum=2)
+            if self.views != 2:
+                raise ValueError(
+                    f"seeds={self.seeds} places its own seed views: it cannot take views={self.views}"
+                )
+        if self.dense_step is not None and (self.seeds is None or self.method != "dense"):
+            raise ValueError(
+                f"dense_step={self.dense_step} is the full circle's dense baseline: it needs seeds and "
+                f"method 'dense', got seeds={self.seeds}, method={self.method!r}"
+            )
 
     def synth_range(self) -> tuple[float, float]:
         """(start, stop) of the gallery range in degrees relative to ``center``.
@@ -146,29 +186,51 @@ class CoilExperiment:
     def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
         return folder.images(obj, [self.center + n * self.alpha for n in range(self.views)])
 
+    def circle(
+        self,
+        folder: CoilFolder,
+        objects: Sequence[int] | None = None,
+        names: tuple[str, str] = ("seeds", "dense_step"),
+    ) -> CircleLayout:
+        """The full circle's layout (``seeds`` set) over the poses every object has;
+        ``names`` name ``seeds`` and ``dense_step`` in errors.
+
+        Raises:
+            ValueError: see :func:`~torch_eigview.apps.circle.circle_layout`.
+        """
+        if self.seeds is None:
+            raise ValueError("circle() needs seeds (the full circle's number of seed views), got None")
+        objs = folder.objects if objects is None else objects
+        common = set.intersection(*(set(folder.poses(obj)) for obj in objs))
+        return circle_layout(sorted(common), self.center, self.seeds, self.method, self.dense_step, names)
+
     def _gallery_of(
         self,
         folder: CoilFolder,
         obj: int,
         seconds: dict[str, float],
         elevations: dict[int, list[float]],
+        layout: CircleLayout | None = None,
     ) -> tuple[torch.Tensor, int, list[float]]:
         """``(views, obj, poses)`` of one object's gallery; adds the synthesis's times to
         ``seconds`` and its elevations to ``elevations``."""
         c = self.center
-        if self.method == "sparse":
+        if layout is not None:
+            if self.method != "nvs":
+                return folder.images(obj, layout.real), obj, layout.real
+            out = synthesize_circle(folder.images(obj, layout.seeds), self.synth[2], self.synthesis)
+        elif self.method == "sparse":
             angles = [c + n * self.alpha for n in range(self.views)]
             return folder.images(obj, angles), obj, angles
-        if self.method == "dense":
+        elif self.method == "dense":
             angles = [c + a for a in self.synth_angles(5.0)]
             return folder.images(obj, angles), obj, angles
-        seeds = self._seeds(folder, obj)
-        thetas = self.synth_angles()
-        out = synthesize_views(seeds, self.alpha, thetas, self.synthesis)
+        else:
+            out = synthesize_views(self._seeds(folder, obj), self.alpha, self.synth_angles(), self.synthesis)
         for key, value in out.seconds.items():
             seconds[key] += value
         elevations[obj] = out.elevations
-        return out.views, obj, [c + t for t in thetas]
+        return out.views, obj, [c + t for t in out.thetas.tolist()]
 
     def run(
         self,
@@ -187,11 +249,12 @@ class CoilExperiment:
             raise ValueError(f"objects {missing} are not in {folder.root} (it holds {folder.objects})")
         if not objects:
             raise ValueError("objects must name at least one object")
+        layout = None if self.seeds is None else self.circle(folder, objects)
         t_start = time.perf_counter()
         seconds = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0, "recognition": 0.0}
         elevations: dict[int, list[float]] = {}
         x, labels, poses = stack_gallery(
-            self._gallery_of(folder, obj, seconds, elevations)
+            self._gallery_of(folder, obj, seconds, elevations, layout)
             for obj in (progress(objects) if progress else objects)
         )
         t0 = time.perf_counter()
@@ -207,8 +270,12 @@ class CoilExperiment:
         seconds["eigen"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        test_angles = angle_range(self.test[0], self.test[1], 5.0, "test")
-        result = score(recognizer, self._tests(folder, objects, test_angles, x.dtype), wrap=True)
+        if layout is None:
+            test_poses = [self.center + a for a in angle_range(self.test[0], self.test[1], 5.0, "test")]
+        else:
+            test_poses = layout.tests
+        tests = self._tests(folder, objects, test_poses, x.dtype)
+        result = score(recognizer, tests, wrap=True, interpolate_pose=self.interpolate_pose)
         seconds["recognition"] = time.perf_counter() - t0
         # Wall time of the whole run, reading the images included.
         seconds["total"] = time.perf_counter() - t_start
@@ -221,12 +288,13 @@ class CoilExperiment:
             seconds=seconds,
             recognizer=recognizer,
             elevations=elevations,
+            pose_median_deg=result.pose_median_deg,
         )
 
     def _tests(
-        self, folder: CoilFolder, objects: list[int], test_angles: list[float], dtype: torch.dtype
+        self, folder: CoilFolder, objects: list[int], test_poses: list[float], dtype: torch.dtype
     ) -> Iterator[tuple[int, int, torch.Tensor, torch.Tensor]]:
-        """Per object its real views over the test range and their poses (wrapped), read lazily."""
+        """Per object its real views at ``test_poses`` (degrees) and their poses (wrapped), read lazily."""
         for obj in objects:
-            truth = wrap_degrees(torch.tensor([self.center + a for a in test_angles], dtype=dtype))
+            truth = wrap_degrees(torch.tensor(test_poses, dtype=dtype))
             yield obj, obj, folder.images(obj, truth.tolist()), truth

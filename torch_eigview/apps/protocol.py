@@ -142,12 +142,15 @@ class Score(Generic[K]):
         pose_mae_deg: mean absolute pose error (degrees) of the correctly recognized
             views; NaN when none is.
         n_test: the number of test views.
+        pose_median_deg: median absolute pose error (degrees) of the same views; NaN
+            when none is.
     """
 
     accuracy: float
     per_object: dict[K, float]
     pose_mae_deg: float
     n_test: int
+    pose_median_deg: float = math.nan
 
 
 def score(
@@ -155,6 +158,7 @@ def score(
     tests: Iterable[tuple[K, int, torch.Tensor, torch.Tensor]],
     *,
     wrap: bool = False,
+    interpolate_pose: bool = False,
 ) -> Score[K]:
     """Recognizes every object's test views and scores them.
 
@@ -165,11 +169,13 @@ def score(
             recognizer's dtype). Consumed lazily: one object's views at a time.
         wrap: take pose errors modulo 360° (:func:`wrap_degrees`), for poses that go
             round a turntable.
+        interpolate_pose: the pose interpolated on the appearance manifold
+            (``recognizer.predict(..., interpolate_pose=True)``), not the nearest view's.
     """
     per_object: dict[K, float] = {}
     n_ok, n_test, pose_err = 0, 0, []
     for key, label, views, truth in tests:
-        result = recognizer.predict(views)
+        result = recognizer.predict(views, interpolate_pose=interpolate_pose)
         ok = result.labels == label
         per_object[key] = 100.0 * float(ok.double().mean())
         n_ok += int(ok.sum())
@@ -182,4 +188,6 @@ def score(
         per_object=per_object,
         pose_mae_deg=float(errors.mean()) if errors.numel() else math.nan,
         n_test=n_test,
+        # The true median (the mean of the two middle values), not torch's lower one.
+        pose_median_deg=float(errors.double().quantile(0.5)) if errors.numel() else math.nan,
     )

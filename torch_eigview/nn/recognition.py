@@ -1,7 +1,11 @@
 """Recognition by nearest neighbour in the eigenspace (Sec. 4.2).
 
 Every gallery view (each object's synthesized views) is projected once; a test image is
-projected and takes the label and pose of the nearest gallery point.
+projected and takes the label and pose of the nearest gallery point. ``predict(x,
+interpolate_pose=True)`` refines the pose on the appearance manifold, as Murase and Nayar
+do: each object's gallery codes in pose order form a curve, taken piecewise linear
+between consecutive views; the test code is projected onto the two segments that meet at
+its nearest view, and the pose is interpolated along the closer one.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from torch_eigview.check import check_finite, check_float_tensor, check_ndim
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 
-__all__ = ["NearestNeighborRecognizer", "Recognition"]
+__all__ = ["NearestNeighborRecognizer", "Recognition", "pose_neighbours"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +65,8 @@ class NearestNeighborRecognizer(nn.Module):
     labels: torch.Tensor
     poses: torch.Tensor
     codes_sqnorm: torch.Tensor
+    pose_before: torch.Tensor
+    pose_after: torch.Tensor
 
     def __init__(
         self,
@@ -110,6 +116,10 @@ class NearestNeighborRecognizer(nn.Module):
         self.register_buffer("codes_sqnorm", codes.square().sum(dim=1))
         self.register_buffer("labels", labels.detach().to(torch.int64).clone())
         self.register_buffer("poses", poses.detach().to(reference).clone())
+        # Derived from labels and poses, so not saved: a loaded recognizer rebuilds them.
+        before, after = pose_neighbours(self.labels, self.poses)
+        self.register_buffer("pose_before", before, persistent=False)
+        self.register_buffer("pose_after", after, persistent=False)
 
     @classmethod
     def from_views(
@@ -146,13 +156,104 @@ class NearestNeighborRecognizer(nn.Module):
         return labels, poses, distances
 
     def _search(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        labels, poses, distances, index, _ = self._search_codes(x)
+        return labels, poses, distances, index
+
+    def _search_codes(
+        self, x: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         z = self.projection(x)
         sq = z.square().sum(dim=1, keepdim=True) - 2 * z @ self.codes.T + self.codes_sqnorm
         best, index = sq.min(dim=1)
-        return self.labels[index], self.poses[index], best.clamp_min(0).sqrt(), index
+        return self.labels[index], self.poses[index], best.clamp_min(0).sqrt(), index, z
 
-    def predict(self, x: torch.Tensor) -> Recognition:
-        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices."""
+    def predict(self, x: torch.Tensor, *, interpolate_pose: bool = False) -> Recognition:
+        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices.
+
+        Args:
+            x: (B, C, H, W) or (B, N) views.
+            interpolate_pose: refine each pose between the nearest gallery view and its
+                neighbours in pose order (:meth:`interpolate_poses`); else the nearest
+                view's pose, as ``forward`` (and the ONNX graph) give it.
+        """
+        if not isinstance(interpolate_pose, bool):
+            raise TypeError(f"interpolate_pose must be a bool, got {type(interpolate_pose).__name__}")
         with torch.no_grad():
-            labels, poses, distances, index = self._search(x)
+            labels, poses, distances, index, z = self._search_codes(x)
+            if interpolate_pose:
+                poses = self.interpolate_poses(z, index)
         return Recognition(labels, poses, distances, index)
+
+    def interpolate_poses(self, z: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        """Poses interpolated on the appearance manifold (Murase and Nayar's pose estimate).
+
+        Each object's gallery codes, in pose order, are joined by straight segments (closed
+        into a loop when its poses go round the turntable, see :func:`pose_neighbours`).
+        ``z`` is projected onto the two segments at its gallery view ``index`` (clamped to
+        them); on the closer one, the fraction t in [0, 1] of the way to the neighbour
+        gives the pose ``pose[index] + t · Δpose`` (Δpose taken the short way round).
+
+        Args:
+            z: (B, k) codes in the eigenspace.
+            index: (B,) int64 gallery index of each code's nearest view.
+
+        Returns:
+            (B,) poses in degrees, of the gallery poses' dtype.
+        """
+        here = self.codes[index]
+        offset = z.to(here.dtype) - here
+        best_t = offset.new_zeros(index.shape)
+        best_sq = offset.square().sum(dim=1)
+        best_j = index
+        for neighbour in (self.pose_before, self.pose_after):
+            j = neighbour[index]
+            step = self.codes[j] - here
+            length_sq = step.square().sum(dim=1)
+            t = ((offset * step).sum(dim=1) / length_sq.clamp_min(torch.finfo(step.dtype).tiny)).clamp(0, 1)
+            sq = (offset - t[:, None] * step).square().sum(dim=1)
+            closer = sq < best_sq
+            best_t, best_sq, best_j = (
+                torch.where(closer, t, best_t),
+                torch.where(closer, sq, best_sq),
+                torch.where(closer, j, best_j),
+            )
+        delta = self.poses[best_j] - self.poses[index]
+        delta = delta - 360 * torch.round(delta / 360)
+        return self.poses[index] + best_t * delta
+
+
+def pose_neighbours(labels: torch.Tensor, poses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each gallery view's neighbours along its object's pose sequence.
+
+    An object's views sorted by pose form a chain; it is closed into a loop when the gap
+    from the last pose round to the first (through 360 degrees) is at most 1.5 times the
+    largest gap inside the chain, i.e. when the views go round the turntable. A view at
+    an open end is its own neighbour on that side.
+
+    Args:
+        labels: (G,) integer labels.
+        poses: (G,) poses in degrees.
+
+    Returns:
+        ``(before, after)``: (G,) int64 gallery indices of the previous and next view.
+
+    Example:
+        >>> before, after = pose_neighbours(torch.tensor([0, 0, 0, 1, 1]),
+        ...                                 torch.tensor([0.0, 120.0, 240.0, 10.0, 0.0]))
+        >>> before.tolist(), after.tolist()
+        ([2, 0, 1, 4, 4], [1, 2, 0, 3, 3])
+    """
+    labels, poses = labels.detach().cpu(), poses.detach().cpu().double()
+    before = torch.arange(labels.numel())
+    after = before.clone()
+    for value in labels.unique():
+        members = (labels == value).nonzero().flatten()
+        order = members[torch.argsort(poses[members], stable=True)]
+        if order.numel() < 2:
+            continue
+        before[order[1:]], after[order[:-1]] = order[:-1], order[1:]
+        sorted_poses = poses[order]
+        around = float(sorted_poses[0] + 360 - sorted_poses[-1])
+        if around <= 1.5 * float(sorted_poses.diff().max()):
+            before[order[0]], after[order[-1]] = order[-1], order[0]
+    return before.to(labels.device), after.to(labels.device)
