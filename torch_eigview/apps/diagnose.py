@@ -140,7 +140,9 @@ def circle_table(folder: CoilFolder, objects: list[int], ms: list[int], k: int, 
         f"{'M':>3} {'nvs':>7} {'sparse':>7} {'dense':>7} {'n_dense':>7} {'pose mean':>9} {'median':>7} {'s':>6}"
     ]
     for m in ms:
-        base = CoilExperiment(seeds=m, components=k, objects=objects, synth=(0.0, 0.0, step))
+        base = CoilExperiment(
+            seeds=m, components=k, objects=objects, synth=(0.0, 0.0, step), interpolate_pose=True
+        )
         runs = {
             method: dataclasses.replace(base, method=method).run(folder)
             for method in ("nvs", "sparse", "dense")
