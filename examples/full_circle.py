@@ -18,22 +18,26 @@ Run: ``python examples/full_circle.py [--root ../shared/data/coil-20-proc] [--se
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from torch_eigview import CoilFolder
 from torch_eigview.apps.diagnose import circle_table
+from torch_eigview.datasets import find_coil_root
 
-DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
 
-
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", default=str(DEFAULT_ROOT), help="COIL-20 folder")
+    parser.add_argument(
+        "--root",
+        help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc)",
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[4, 6, 8, 12], help="values of M")
     parser.add_argument("--step", type=float, default=5.0, help="synthesized step, degrees")
     parser.add_argument("--components", type=int, default=20)
-    args = parser.parse_args()
-    folder = CoilFolder(args.root)
+    args = parser.parse_args(argv)
+    try:  # a missing folder: say where the images go, not a traceback
+        folder = CoilFolder(find_coil_root(args.root))
+    except ValueError as exc:
+        parser.error(str(exc))
     print(circle_table(folder, folder.objects, args.seeds, args.components, args.step))
 
 

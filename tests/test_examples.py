@@ -34,7 +34,13 @@ def test_script_imports(path: Path) -> None:
     assert callable(getattr(module, "main", None)), f"{path.name} has no main()"
 
 
-COIL_EXAMPLES = ["coil20_recognition", "kernel_pca", "train_frozen_features", "warp_augmentation"]
+COIL_EXAMPLES = [
+    "coil20_recognition",
+    "full_circle",
+    "kernel_pca",
+    "train_frozen_features",
+    "warp_augmentation",
+]
 
 
 @pytest.mark.parametrize("name", COIL_EXAMPLES)
