@@ -4,8 +4,9 @@ Convention:
     Images are (C, H, W) (batched (B, C, H, W)); x is the column, y the row; pixel
     centres are at integer coordinates. A subclass builds :class:`~torch_eigview.warp.maps.WarpMaps`
     (target → source, in pixels) from the correspondences of the two seed views; the seed
-    images are then sampled with :func:`kornia.geometry.transform.remap` (bilinear,
-    ``align_corners=True``: the tent weights of Eq. 4) and blended with the maps' weights.
+    images are then sampled as :func:`kornia.geometry.transform.remap` samples them
+    (bilinear, zero padding, ``align_corners=True``: the tent weights of Eq. 4; one
+    ``grid_sample`` call for all sources and angles) and blended with the maps' weights.
 """
 
 from __future__ import annotations

@@ -52,36 +52,6 @@ class WarpMaps:
         return self.src_x.shape[0]
 
 
-def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
-    """Bilinear sampler of ``fields`` (B, T, F, H, W) at pixel coordinates (B, T, H, W).
-
-    These are maps, not images: sampled with ``grid_sample`` directly (border padding,
-    ``align_corners=True``, the convention kornia's ``remap`` uses for pixel maps), the
-    first ``n_fields`` of the F fields (default all) in one call.
-    """
-    b, t, f, h, w = fields.shape
-    flat = fields.reshape(b * t, f, h, w)
-    sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
-    grid = fields.new_empty(b, t, h, w, 2)  # written in place on every call
-
-    def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
-        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad or flat.requires_grad):
-            # out= does not differentiate, and grid_sample keeps its grid for the backward
-            # pass, so a differentiated call gets a grid of its own.
-            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)
-        else:
-            torch.mul(x, sx, out=grid[..., 0]).sub_(1)
-            torch.mul(y, sy, out=grid[..., 1]).sub_(1)
-            g = grid
-        src = flat if n_fields == f else flat[:, :n_fields]
-        out = F.grid_sample(
-            src, g.view(b * t, h, w, 2), mode="bilinear", padding_mode="border", align_corners=True
-        )
-        return out.view(b, t, n_fields, h, w)
-
-    return sample
-
-
 def _renormalize(weighted: torch.Tensor, share: torch.Tensor) -> torch.Tensor:
     """Silhouette-aware sampling's last step: ``weighted`` (foreground taps only) divided by
     the foreground ``share`` of the taps, 0 where that share is below 1/2 (background)."""
@@ -92,8 +62,10 @@ def _field_sampler(fields: torch.Tensor, t: int) -> Callable[..., torch.Tensor]:
     """Bilinear sampler of per-object ``fields`` (B, F, H, W) at T·H·W points per object.
 
     The fields do not depend on the target angle, so one input serves all T angles: the
-    points go into the grid as (B, T·H, W), one ``grid_sample`` call (border padding,
-    ``align_corners=True``, as :func:`_sampler`) instead of T stacked copies of the fields.
+    points go into the grid as (B, T·H, W), one ``grid_sample`` call (border padding: these
+    are maps, not images; ``align_corners=True``, the convention kornia's ``remap`` uses for
+    pixel maps) instead of T stacked copies of the fields; the first ``n_fields`` fields
+    (default all).
     """
     b, f, h, w = fields.shape
     sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
