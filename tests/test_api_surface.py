@@ -94,8 +94,10 @@ SUBPACKAGES = {
     "scale": [
         "ViewCache",
         "available_cpus",
+        "default_threads",
         "fit_distributed",
         "synthesize_objects",
+        "threads",
     ],
     "io": [
         "OnnxModelInfo",

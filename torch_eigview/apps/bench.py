@@ -1,7 +1,8 @@
 """Benchmarks: the warp, the eigen step, GEMM throughput, scaling and COIL-100-sized builds.
 
 Run ``python -m torch_eigview.apps.bench`` (``--quick`` for a small run, ``--json FILE``,
-``--png FILE``, ``--sections warp eigen gemm scaling coil100``). Times are the best of a
+``--png FILE``, ``--sections warp eigen gemm scaling coil100 stages threads cuda``,
+``--threads N``; the last three sections are in :mod:`torch_eigview.apps.bench_speed`). Times are the best of a
 few repeats (``time.perf_counter``), printed with ratios to our method.
 
 Peak memory: torch's CPU allocator keeps no statistics and ``tracemalloc`` does not see
@@ -29,11 +30,14 @@ import torch
 
 from torch_eigview.apps.bench_plot import plot_results
 from torch_eigview.apps.bench_scaling import bench_coil100, bench_scaling, run_case, smooth_views
+from torch_eigview.apps.bench_speed import run_sections
+from torch_eigview.apps.cli import threads_arg
 from torch_eigview.files import check_outputs, write_json
+from torch_eigview.scale.thread_policy import threads
 
 __all__ = ["main", "smooth_views"]
 
-_SECTIONS = ("warp", "eigen", "gemm", "scaling", "coil100")
+_SECTIONS = ("warp", "eigen", "gemm", "scaling", "coil100", "stages", "threads", "cuda")
 _WARP_SLOW_MAX = 128  # largest side for the sparse G·C and skimage warp comparisons
 
 
@@ -188,6 +192,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--root", default="../shared/data/coil-20-proc", help="COIL-20 folder for the eigen section"
     )
+    p.add_argument("--threads", type=threads_arg, default=None, metavar="N", help="torch threads (default 1)")
     p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     return p
 
@@ -325,8 +330,13 @@ def _section_coil100(results: dict[str, Any], quick: bool) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Runs the benchmarks, prints them, optionally writes JSON and a PNG; returns 0."""
+    args = _parser().parse_args(argv)
+    with threads(args.threads):  # the commands' policy, restored on return
+        return _main(args)
+
+
+def _main(args: argparse.Namespace) -> int:
     parser = _parser()
-    args = parser.parse_args(argv)
     if args.worker is not None:
         print(json.dumps(run_case(json.loads(args.worker))))
         return 0
@@ -350,6 +360,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _section_scaling(results, quick)
     if "coil100" in args.sections:
         _section_coil100(results, quick)
+    run_sections(args.sections, results, args.root, quick)
     try:
         if args.json:
             write_json(args.json, results)

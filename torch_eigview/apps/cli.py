@@ -19,7 +19,10 @@ from typing import TYPE_CHECKING, TypeVar
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
+    import torch
+
     from torch_eigview.apps.experiment import CoilResult
+    from torch_eigview.datasets.coil import CoilFolder
 
 __all__ = ["main", "progress_bar"]
 
@@ -153,8 +156,16 @@ def build_parser() -> argparse.ArgumentParser:
     coil.add_argument(
         "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
     )
+    coil.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        default="cpu",
+        help="where the views, the warp, the eigenspace and recognition run (the optical flow "
+        "stays on the CPU: scikit-image)",
+    )
     _add_export_and_predict(sub)
     _add_quiet(coil)
+    _add_threads(coil)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
     demo.add_argument("--alpha", type=float, default=10.0, help="angle between the two seed views, degrees")
     demo.add_argument("--size", type=int, default=64, help="image side in pixels")
@@ -162,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
     demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
     _add_quiet(demo)
+    _add_threads(demo)
     synth = sub.add_parser(
         "synth", help="the Fig. 2 protocol per camera model (orthographic, affine, perspective)"
     )
@@ -175,6 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
     _add_quiet(synth)
+    _add_threads(synth)
     # Listed for --help; main() hands its arguments to torch_eigview.apps.bench unparsed.
     sub.add_parser("bench", help="benchmarks (warp, eigen step, GEMM, scaling): eigview bench --help")
     return parser
@@ -183,6 +196,28 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_quiet(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)"
+    )
+
+
+def threads_arg(text: str) -> int:
+    """``--threads N``: an int >= 1 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--threads must be an integer >= 1, got {text!r}")
+    return value
+
+
+def _add_threads(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--threads",
+        type=threads_arg,
+        default=None,
+        metavar="N",
+        help="torch intra-op threads (default 1: a second thread gains little here and spins "
+        "when another process keeps the cores busy)",
     )
 
 
@@ -277,7 +312,7 @@ def _run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.synthesis import SynthesisOptions
 
     check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
-    folder = CoilFolder(find_coil_root(args.root))
+    folder = _on_device(CoilFolder(find_coil_root(args.root)), _device(args.device))
     _check_circle_flags(args)
     experiment = CoilExperiment(
         alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
@@ -322,6 +357,31 @@ def _run_coil(args: argparse.Namespace) -> int:
         meta = {"command": "coil", "alpha": args.alpha, "method": args.method, "accuracy": result.accuracy}
         save_recognizer(args.save, result.recognizer, meta)
     return 0
+
+
+def _device(name: str) -> torch.device:
+    import torch
+
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda needs a CUDA device, but torch.cuda.is_available() is False")
+    return torch.device(name)
+
+
+def _on_device(folder: CoilFolder, device: torch.device) -> CoilFolder:
+    """``folder`` whose images arrive on ``device``: the whole experiment then runs there
+    (seeds, warp, eigenspace, recognition) except the optical flow, which scikit-image runs
+    on the CPU (the correspondence moves the seeds there and its result back)."""
+    if device.type == "cpu":
+        return folder
+    from torch_eigview.datasets.coil import CoilFolder
+
+    class DeviceFolder(CoilFolder):
+        def images(self, obj: int, degrees_list: Sequence[float] | torch.Tensor) -> torch.Tensor:
+            return super().images(obj, degrees_list).to(device)
+
+    moved = DeviceFolder.__new__(DeviceFolder)
+    moved.__dict__.update(folder.__dict__)
+    return moved
 
 
 def _run_demo(args: argparse.Namespace) -> int:
@@ -373,14 +433,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        if args.command == "coil":
-            return _run_coil(args)
+        runs = {"coil": _run_coil, "demo": _run_demo, "synth": _run_synth}
+        if args.command in runs:
+            from torch_eigview.scale.thread_policy import threads
+
+            with threads(args.threads):  # the policy, restored on return (main() may be called)
+                return runs[args.command](args)
         if args.command == "export":
             return _run_export(args)
-        if args.command == "demo":
-            return _run_demo(args)
-        if args.command == "synth":
-            return _run_synth(args)
         if args.command == "predict":
             from torch_eigview.apps.predict import run
 

@@ -58,15 +58,19 @@ def invert_row_map(
     # slot m is column col0 + m and exists iff m <= room (at most W slots, whatever the span).
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.where(seg_ok, torch.floor(f1).clamp(max=w - 1) - col0, -1.0)
-    idx, key, src = _segment_columns(f0, length, depth, col0, room)
+    parts = _segment_columns(f0, length, depth, col0, room)
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
+    # Both reductions are maxima, so the parts (slot 0, then the few longer segments) are
+    # scattered one after the other, never concatenated.
     best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
-    best.scatter_reduce_(0, idx, key, reduce="amax")
-    win = key >= best.index_select(0, idx)
-    out = torch.full((n + 1,), math.nan, dtype=dtype, device=device)
-    out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax", include_self=False)
+    for idx, key, _ in parts:
+        best.scatter_reduce_(0, idx, key, reduce="amax")
+    out = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
+    for idx, key, src in parts:
+        win = key >= best.index_select(0, idx)
+        out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax")
     hit = best[:n] != -math.inf
-    return out[:n].view(b, t, h, w), hit.view(b, t, h, w)
+    return torch.where(hit, out[:n], math.nan).view(b, t, h, w), hit.view(b, t, h, w)
 
 
 def _interpolate(
@@ -81,7 +85,7 @@ def _interpolate(
 
 def _segment_columns(
     f0: torch.Tensor, length: torch.Tensor, depth: torch.Tensor | None, col0: torch.Tensor, room: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
     Segment k of a row (source pixels k, k + 1) starts at target column ``f0`` and spans
@@ -89,8 +93,9 @@ def _segment_columns(
     (all (B, T, H, W - 1); ``room`` -1 for none). ``depth`` (B, T, H, W) or None.
 
     Returns:
-        ``(idx, key, src)``, each (P,): the flat target pixel (B·T·H·W, a spare slot, with
-        key -inf where slot 0 is no target column), the z-buffer key and the source column.
+        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel (B·T·H·W, a
+        spare slot, with key -inf where slot 0 is no target column), the z-buffer key and
+        the source column.
     """
     b, t, h, w1 = f0.shape
     w = w1 + 1
@@ -125,8 +130,7 @@ def _segment_columns(
         src_parts.append(src_m)
         m += 1
         cand = cand[room_flat.index_select(0, cand) >= m]
-    idx, key, src = (torch.cat(p) if len(p) > 1 else p[0] for p in (idx_parts, key_parts, src_parts))
-    return idx, key, src
+    return list(zip(idx_parts, key_parts, src_parts, strict=True))
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
@@ -134,19 +138,39 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
 
     Beyond the last hit of a row the fallback map, shifted to meet that hit, continues
     it; a row with no hit takes the fallback map.
+
+    Args:
+        src: (..., W) map, trusted where ``hit``.
+        hit: (..., W) bool, of the shape of ``src``.
+        fallback: map broadcastable to ``src`` (an expanded tensor is not copied).
+
+    Returns:
+        (..., W) the map with its holes filled (a new tensor).
     """
     w = src.shape[-1]
-    cols = torch.arange(w, device=src.device).expand_as(hit)
-    prev = torch.where(hit, cols, -1).cummax(dim=-1).values
+    # Only the holes are computed (a warp's map is mostly hits); the nearest hit before and
+    # after each comes from a running max / min over the row, in int32 to halve the traffic.
+    holes = (~hit).reshape(-1).nonzero().squeeze(1)
+    out = src.reshape(-1).clone()
+    if holes.numel() == 0:
+        return out.view(src.shape)
+    cols = torch.arange(w, dtype=torch.int32, device=src.device)
+    prev = torch.where(hit, cols, -1).cummax(dim=-1).values.reshape(-1).index_select(0, holes).long()
     nxt = torch.where(hit, cols, w).flip(-1).cummin(dim=-1).values.flip(-1)
+    nxt = nxt.reshape(-1).index_select(0, holes).long()
+    col = holes % w
+    row = holes - col
     has_prev, has_next = prev >= 0, nxt < w
     p, n = prev.clamp(0, w - 1), nxt.clamp(0, w - 1)
-    sp, sn = src.gather(-1, p), src.gather(-1, n)
-    fp, fn = fallback.gather(-1, p), fallback.gather(-1, n)
+    flat_src = src.reshape(-1)
+    fb = fallback.expand_as(src)
+    sp, sn = flat_src.index_select(0, row + p), flat_src.index_select(0, row + n)
+    fp, fn, f0 = (torch.take(fb, row + k) for k in (p, n, col))
     span = (n - p).clamp_min(1).to(src.dtype)
-    between = sp + (sn - sp) * (cols - p).to(src.dtype) / span
-    left_only = fallback + (sp - fp)
-    right_only = fallback + (sn - fn)
+    between = sp + (sn - sp) * (col - p).to(src.dtype) / span
+    left_only = f0 + (sp - fp)
+    right_only = f0 + (sn - fn)
     filled = torch.where(has_prev & has_next, between, torch.where(has_prev, left_only, right_only))
-    filled = torch.where(has_prev | has_next, filled, fallback)
-    return torch.where(hit, src, filled)
+    filled = torch.where(has_prev | has_next, filled, f0)
+    out.index_put_((holes,), filled)
+    return out.view(src.shape)

@@ -4,8 +4,9 @@ Convention:
     Images are (C, H, W) (batched (B, C, H, W)); x is the column, y the row; pixel
     centres are at integer coordinates. A subclass builds :class:`~torch_eigview.warp.maps.WarpMaps`
     (target → source, in pixels) from the correspondences of the two seed views; the seed
-    images are then sampled with :func:`kornia.geometry.transform.remap` (bilinear,
-    ``align_corners=True``: the tent weights of Eq. 4) and blended with the maps' weights.
+    images are then sampled as :func:`kornia.geometry.transform.remap` samples them
+    (bilinear, zero padding, ``align_corners=True``: the tent weights of Eq. 4; one
+    ``grid_sample`` call for all sources and angles) and blended with the maps' weights.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 import math
 
 import torch
-from kornia.geometry.transform import remap
+import torch.nn.functional as F
 
 from torch_eigview.check import as_angle_tensor, check_alpha, check_float_tensor, check_ndim, check_number
 from torch_eigview.geometry.correspondence import Correspondence
@@ -130,15 +131,10 @@ class ViewWarp(torch.nn.Module):
                 )
             m = (masks.to(views.device) != 0).to(views.dtype)[:, :, None]
             views = torch.cat([views * m, m], dim=2)  # the mask rides along: one warp for both
-        rows = torch.arange(h, dtype=views.dtype, device=views.device).view(1, h, 1).expand(b * t, h, w)
-        ch = views.shape[2]
-        out = views.new_zeros(b, t, ch, h, w)
+        warped = _sample_views(views, maps.src_x, maps.src_y)  # (S, B, T, C', H, W)
+        out = views.new_zeros(b, t, views.shape[2], h, w)
         for i in range(s):
-            img = views[i][:, None].expand(b, t, ch, h, w).reshape(b * t, ch, h, w)
-            map_x = maps.src_x[i].reshape(b * t, h, w).to(views.dtype)
-            map_y = rows if maps.src_y is None else maps.src_y[i].reshape(b * t, h, w).to(views.dtype)
-            warped = remap(img, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
-            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped.view(b, t, ch, h, w)
+            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped[i]
         if masks is None:
             return out
         return _renormalize(out[:, :, :c], out[:, :, c:])
@@ -199,3 +195,48 @@ class ViewWarp(torch.nn.Module):
         maps = self.maps(corr, thetas, n_sources=len(views))
         out = self.apply_maps(maps, torch.stack(views), masks)
         return out[0] if unbatched else out
+
+
+def _sample_views(views: torch.Tensor, src_x: torch.Tensor, src_y: torch.Tensor | None) -> torch.Tensor:
+    """Bilinear samples of the seed views at the maps, all sources and angles in one call.
+
+    kornia's ``remap`` per source, without its per-call overhead and without T copies of
+    each seed: the T angles' points go into one grid per (source, object), (S·B, T·H, W),
+    so a seed image is read in place. The coordinates are normalized with kornia's
+    formula (``2 / (W - 1)`` times the pixel, minus 1) and sampled with zero padding and
+    ``align_corners=True``, so the samples equal ``remap``'s bit for bit.
+
+    Args:
+        views: (S, B, C, H, W) seed images.
+        src_x: (S, B, T, H, W) source columns; ``src_y`` the same rows, or None (own row).
+
+    Returns:
+        (S, B, T, C, H, W) samples.
+    """
+    s, b, c, h, w = views.shape
+    t = src_x.shape[2]
+    dtype, device = views.dtype, views.device
+    one = torch.ones((), dtype=dtype, device=device)
+    # kornia's normalize_pixel_coordinates: the factor is a division in the views' dtype.
+    fx = one if w == 1 else 2.0 / (one * w - 1.0)
+    fy = one if h == 1 else 2.0 / (one * h - 1.0)
+    ox, oy = (0.0 if w == 1 else 1.0), (0.0 if h == 1 else 1.0)
+    ys = torch.arange(h, dtype=dtype, device=device).view(h, 1) if src_y is None else src_y.to(dtype)
+    xs = src_x.to(dtype)
+    if torch.is_grad_enabled() and (xs.requires_grad or ys.requires_grad):
+        grid = torch.stack([xs * fx - ox, (ys * fy - oy).expand_as(xs)], dim=-1)
+    else:
+        grid = views.new_empty(s, b, t, h, w, 2)
+        torch.mul(xs, fx, out=grid[..., 0]).sub_(ox)
+        if src_y is None:
+            grid[..., 1] = ys * fy - oy
+        else:
+            torch.mul(ys, fy, out=grid[..., 1]).sub_(oy)
+    out = F.grid_sample(
+        views.reshape(s * b, c, h, w),
+        grid.view(s * b, t * h, w, 2),
+        mode="bilinear",
+        padding_mode="zeros",
+        align_corners=True,
+    )
+    return out.view(s, b, c, t, h, w).transpose(2, 3)

@@ -52,63 +52,105 @@ class WarpMaps:
         return self.src_x.shape[0]
 
 
-def _sampler(fields: torch.Tensor) -> Callable[..., torch.Tensor]:
-    """Bilinear sampler of ``fields`` (B, T, F, H, W) at pixel coordinates (B, T, H, W).
-
-    These are maps, not images: sampled with ``grid_sample`` directly (border padding,
-    ``align_corners=True``, the convention kornia's ``remap`` uses for pixel maps), the
-    first ``n_fields`` of the F fields (default all) in one call.
-    """
-    b, t, f, h, w = fields.shape
-    flat = fields.reshape(b * t, f, h, w)
-    sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
-    grid = fields.new_empty(b, t, h, w, 2)  # written in place on every call
-
-    def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
-        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad or flat.requires_grad):
-            # out= does not differentiate, and grid_sample keeps its grid for the backward
-            # pass, so a differentiated call gets a grid of its own.
-            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)
-        else:
-            torch.mul(x, sx, out=grid[..., 0]).sub_(1)
-            torch.mul(y, sy, out=grid[..., 1]).sub_(1)
-            g = grid
-        src = flat if n_fields == f else flat[:, :n_fields]
-        out = F.grid_sample(
-            src, g.view(b * t, h, w, 2), mode="bilinear", padding_mode="border", align_corners=True
-        )
-        return out.view(b, t, n_fields, h, w)
-
-    return sample
-
-
 def _renormalize(weighted: torch.Tensor, share: torch.Tensor) -> torch.Tensor:
     """Silhouette-aware sampling's last step: ``weighted`` (foreground taps only) divided by
     the foreground ``share`` of the taps, 0 where that share is below 1/2 (background)."""
     return torch.where(share >= 0.5, weighted / share.clamp_min(0.5), 0.0)
 
 
+def _field_sampler(fields: torch.Tensor, t: int) -> Callable[..., torch.Tensor]:
+    """Bilinear sampler of per-object ``fields`` (B, F, H, W) at T·H·W points per object.
+
+    The fields do not depend on the target angle, so one input serves all T angles: the
+    points go into the grid as (B, T·H, W), one ``grid_sample`` call (border padding: these
+    are maps, not images; ``align_corners=True``, the convention kornia's ``remap`` uses for
+    pixel maps) instead of T stacked copies of the fields; the first ``n_fields`` fields
+    (default all).
+    """
+    b, f, h, w = fields.shape
+    sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
+    grid = fields.new_empty(b, t, h, w, 2)  # written in place when nothing is differentiated
+    firsts = [fields[:, :n].contiguous() for n in range(1, f)] + [fields]
+
+    def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
+        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad or fields.requires_grad):
+            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)  # grid_sample keeps it for backward
+        else:
+            torch.mul(x, sx, out=grid[..., 0]).sub_(1)
+            torch.mul(y, sy, out=grid[..., 1]).sub_(1)
+            g = grid
+        g = g.view(b, t * h, w, 2)
+        src = firsts[n_fields - 1]
+        out = F.grid_sample(src, g, mode="bilinear", padding_mode="border", align_corners=True)
+        return out.view(b, n_fields, t, h, w).transpose(1, 2)
+
+    return sample
+
+
 def _refine_2d(
-    src_x: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, valid: torch.Tensor, iters: int = 4
+    src_x: torch.Tensor,
+    disparity: torch.Tensor,
+    coef: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor],
+    c: float,
+    valid: torch.Tensor,
+    own: torch.Tensor,
+    iters: int = 4,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Inverts the 2D forward map p -> p + (dx, dy)(p) by fixed-point iteration.
 
+    The displacement of source pixel p = (x, y) towards target angle t is linear in two
+    fields that do not depend on t, the centred column G = x - c and the disparity D:
+    ``dx = kx_g G + kx_d D`` and ``dy = ky_g G + ky_d D`` (``coef``). So only D is
+    sampled (G is exact: its bilinear interpolation with border padding is the clamped
+    column), once per object for all T angles.
+
     Starts from the row-wise inverse ``src_x``; a target pixel is a hit when the iteration
-    lands on a valid source pixel that maps back to within half a pixel.
+    lands on a valid source pixel that maps back to within half a pixel. The iteration
+    stops early, with the same result, once a step leaves every coordinate unchanged.
+
+    Args:
+        src_x: (B, T, H, W) row-wise inverse, the starting column.
+        disparity: (B, H, W) D on the source pixel grid.
+        coef: ``(kx_g, kx_d, ky_g, ky_d)``, each (1, T, 1, 1) or (B, T, 1, 1).
+        c: column of the rotation axis.
+        valid: (B, H, W) bool, source pixels with a trusted correspondence.
+        own: (1, T, 1, 1) or (B, T, 1, 1) bool, angles at which every source pixel counts
+            as valid (the seed's own angle).
+
+    Returns:
+        ``(src_x, src_y, hit)``, each (B, T, H, W).
     """
-    b, t, h, w = dx.shape
-    xx = torch.arange(w, dtype=dx.dtype, device=dx.device).expand(b, t, h, w)
-    yy = torch.arange(h, dtype=dx.dtype, device=dx.device).view(h, 1).expand(b, t, h, w)
-    valid_t = (valid[:, None] if valid.ndim == 3 else valid).to(dx.dtype).expand(b, t, h, w)
-    sample = _sampler(torch.stack([dx, dy, valid_t], dim=2))
-    sx, sy = src_x, yy - dy
+    _, t, h, w = src_x.shape
+    kx_g, kx_d, ky_g, ky_d = coef
+    dtype = disparity.dtype
+    xx = torch.arange(w, dtype=dtype, device=disparity.device)
+    yy = torch.arange(h, dtype=dtype, device=disparity.device).view(h, 1)
+    fields = torch.stack([disparity, valid.to(dtype)], dim=1)  # (B, 2, H, W)
+    sample = _field_sampler(fields, t)
+
+    # x - dx and y - dy with the constant parts folded per angle: a few passes per step.
+    x_at = (xx + kx_g * c, kx_g, kx_d)
+    y_at = (yy + ky_g * c, ky_g, ky_d)
+
+    def step(base: tuple[torch.Tensor, ...], g: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
+        return torch.addcmul(base[0] - base[1] * g, base[2], d, value=-1)
+
+    sx, sy = src_x, yy - (ky_g * (xx - c) + ky_d * disparity[:, None])
     for _ in range(iters):
-        d = sample(sx, sy, 2)  # the displacement only; validity once, at the end
-        sx, sy = xx - d[:, :, 0], yy - d[:, :, 1]
-    d = sample(sx, sy)
-    residual = (sx + d[:, :, 0] - xx).abs() + (sy + d[:, :, 1] - yy).abs()
+        d = sample(sx, sy, 1)[:, :, 0]
+        g = sx.clamp(0, w - 1)
+        nx, ny = step(x_at, g, d), step(y_at, g, d)
+        # A fixed point: every further step would give the same maps again.
+        done = torch.equal(nx, sx) and torch.equal(ny, sy)
+        sx, sy = nx, ny
+        if done:
+            break
+    s = sample(sx, sy)
+    g = sx.clamp(0, w - 1)
+    # sx + dx - xx = sx - (x - dx) at the sampled disparity.
+    residual = (sx - step(x_at, g, s[:, :, 0])).abs() + (sy - step(y_at, g, s[:, :, 0])).abs()
     inside = (sx >= 0) & (sx <= w - 1) & (sy >= 0) & (sy <= h - 1)
-    return sx, sy, (d[:, :, 2] > 0.999) & inside & (residual < 0.5)
+    return sx, sy, ((s[:, :, 1] > 0.999) | own) & inside & (residual < 0.5)
 
 
 @dataclass(frozen=True)
@@ -154,7 +196,7 @@ class RowGeometry:
         # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
         # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
         other = self.a if second else self.b
-        valid = valid[:, None] | (other == 0)
+        base_valid, valid = valid, valid[:, None] | (other == 0)
         src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch)
         # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
         scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
@@ -162,10 +204,20 @@ class RowGeometry:
         src_x = fill_row_holes(src_x, hit, (c + (cols - c) * scale).expand_as(src_x))
         if self.tilt == 0.0:
             return src_x, None, hit
+        # The 2D displacement (dst_x - grid, dy) is linear in the grid's centred column G and
+        # the disparity D towards the other view: x1 - c = G, x2 - c = G + D for view 1 as the
+        # source, x2 - c = G, x1 - c = G + D for view 2.
         phi = al if second else 0.0
-        dy = -self.tilt * (big_z * (torch.cos(th) - math.cos(phi)) - big_x * (torch.sin(th) - math.sin(phi)))
-        grid = x2 if second else x1
-        return _refine_2d(src_x, dst_x_for_src - grid[:, None], dy, valid)
+        dcos, dsin = torch.cos(th) - math.cos(phi), torch.sin(th) - math.sin(phi)
+        z_d, x_d = (-math.cos(al), 1.0) if second else (1.0, 0.0)
+        coef = (
+            self.a + self.b - 1,
+            self.a if second else self.b,
+            -self.tilt * (dcos * (1 - math.cos(al)) / math.sin(al) - dsin),
+            -self.tilt * (dcos * z_d / math.sin(al) - dsin * x_d),
+        )
+        disparity = x1 - x2 if second else x2 - x1
+        return _refine_2d(src_x, disparity, coef, c, base_valid, other == 0)
 
     def maps(
         self,
