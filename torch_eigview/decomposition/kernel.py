@@ -312,9 +312,7 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
 
     # ------------------------------------------------------------------ inference
     def _check_views(self, X: object, fit: _KernelFit) -> torch.Tensor:
-        x = self._check_fitted_views(X, fit)
-        check_finite(x, "X")
-        return x.detach().reshape(x.shape[0], -1)
+        return self._check_fitted_views(X, fit)
 
     def transform(self, X: torch.Tensor) -> torch.Tensor:
         """Projects views onto the kernel eigenspace.
