@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from torch_eigview.check import as_angle_tensor, check_choice
+from torch_eigview.check import as_angle_tensor, check_choice, check_limit
 from torch_eigview.io.images import read_image, to_unit_float
 
 __all__ = ["CoilFolder", "parse_object_spec"]
@@ -29,6 +29,8 @@ _SPEC_RE = re.compile(r"\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?", re.ASCII)
 _POSE_UNITS = ("auto", "index", "degrees")
 _N_INDEX_POSES = 72  # COIL-20: pose indices 0..71, 5 degrees apart
 _ANGLE_TOL = 1e-6  # degrees
+# Object ids one selection may name (COIL-100 has 100).
+OBJECT_LIMIT = ("EIGVIEW_MAX_OBJECTS", 100_000)
 
 
 def parse_object_spec(spec: str) -> list[int]:
@@ -42,7 +44,8 @@ def parse_object_spec(spec: str) -> list[int]:
 
     Raises:
         TypeError: ``spec`` is not a string.
-        ValueError: ``spec`` is empty, malformed, holds 0 or a reversed range.
+        ValueError: ``spec`` is empty, malformed, holds 0 or a reversed range, or names more
+            ids than ``EIGVIEW_MAX_OBJECTS`` (default 100,000).
     """
     if not isinstance(spec, str):
         raise TypeError(f"spec must be a string such as '1-20' or '1,3,5-7', got {type(spec).__name__}")
@@ -57,6 +60,8 @@ def parse_object_spec(spec: str) -> list[int]:
             raise ValueError(f"spec={spec!r} must hold positive object ids, got {lo}")
         if hi < lo:
             raise ValueError(f"spec={spec!r} holds the reversed range {lo}-{hi} (must be low-high)")
+        # Bounded before the set is built: "1-99999999999" would fill the memory.
+        check_limit(len(ids) + hi - lo + 1, f"spec={spec!r}", "object ids", *OBJECT_LIMIT)
         ids.update(range(lo, hi + 1))
     return sorted(ids)
 
