@@ -35,6 +35,8 @@ def check_regular_file(path: str | os.PathLike[str], what: str = "image") -> os.
     """
     try:
         info = os.stat(path)  # follows symlinks; a loop raises ELOOP
+    except FileNotFoundError:
+        raise ValueError(f"{what} {os.fspath(path)!s} does not exist") from None
     except OSError as exc:
         raise ValueError(f"{what} {os.fspath(path)!s} cannot be used: {exc.strerror or exc}") from None
     if not stat.S_ISREG(info.st_mode):
