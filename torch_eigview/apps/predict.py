@@ -207,7 +207,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"eigview predict: error: {escape(row)}", file=sys.stderr)
                 n_failed += 1
                 continue
-            predictions.append(row)
+            if args.json:  # held for the file only: memory stays flat without it
+                predictions.append(row)
             print(f"{escape(row.image)}\tlabel {escape(row.label)}\tpose {row.pose:g}\tdistance {row.distance:.6g}")
     if args.json:
         with open(args.json, "w") as fh:
