@@ -68,12 +68,16 @@ def check_number(value: object, name: str) -> float:
 
 
 def check_alpha(alpha: float, name: str = "alpha") -> float:
-    """Checks a seed-view angle in degrees: finite and not a multiple of 180."""
+    """Checks a seed-view angle in degrees: finite, within [-360, 360] and not a multiple of 180."""
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)):
         raise TypeError(f"{name} must be a number of degrees, got {type(alpha).__name__}")
     alpha = float(alpha)
     if not math.isfinite(alpha):
         raise ValueError(f"{name}={alpha} must be finite")
+    if abs(alpha) > 360:
+        # Beyond a turn the angle is another angle in disguise, and at 1e300 degrees a
+        # float's spacing exceeds the turn: sin(alpha) would be noise.
+        raise ValueError(f"{name}={alpha} must be an angle between seed views in [-360, 360] degrees")
     if abs(math.sin(math.radians(alpha))) < 1e-8:
         raise ValueError(f"{name}={alpha} must not be a multiple of 180 degrees (sin({name}) is zero)")
     return alpha
@@ -217,8 +221,8 @@ def check_positive(value: object, name: str, *, allow_zero: bool = False) -> flo
     """A finite real number > 0 (>= 0 with ``allow_zero``) as a float; NaN is refused."""
     number = check_number(value, name)
     if not math.isfinite(number) or number < 0 or (number == 0 and not allow_zero):
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name}={value!r} must be a finite number {bound}")
+        sign, bound = ("non-negative", ">= 0") if allow_zero else ("positive", "> 0")
+        raise ValueError(f"{name}={value!r} must be {sign} (a finite number {bound})")
     return number
 
 

@@ -6,6 +6,7 @@ projected and takes the label and pose of the nearest gallery point.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import torch
@@ -99,6 +100,14 @@ class NearestNeighborRecognizer(nn.Module):
             raise ValueError(f"poses must have shape ({g},), got {tuple(poses.shape)}")
         check_finite(poses.to(torch.float64), "poses")
         n_distinct = int(labels.unique().numel())
+        if label_names is not None and (
+            isinstance(label_names, (str, bytes, Mapping)) or not isinstance(label_names, Sequence)
+        ):
+            # A str would be split into characters and a dict into its keys, silently.
+            raise TypeError(
+                f"label_names must be None or a list of names, one per distinct label, got "
+                f"{type(label_names).__name__} {label_names!r:.80}"
+            )
         if label_names is not None and len(label_names) != n_distinct:
             raise ValueError(
                 f"label_names must name the {n_distinct} distinct labels, got {len(label_names)} names"
@@ -136,6 +145,10 @@ class NearestNeighborRecognizer(nn.Module):
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Recognizes a batch of views.
 
+        Export-friendly by contract: no data-dependent check runs here (no ``.item()``, no
+        branch on values), so NaN or infinite views give NaN distances rather than an
+        error. Callers with untrusted data use :meth:`predict`, which checks.
+
         Args:
             x: (B, C, H, W) or (B, N) views (the projection's dtype and size).
 
@@ -152,7 +165,34 @@ class NearestNeighborRecognizer(nn.Module):
         return self.labels[index], self.poses[index], best.clamp_min(0).sqrt(), index
 
     def predict(self, x: torch.Tensor) -> Recognition:
-        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices."""
+        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices,
+        with the checks ``forward`` leaves out: finite views, and for a unit-norm projection
+        views whose L2 norm does not overflow the dtype (they would project to zeros).
+
+        Args:
+            x: (B, C, H, W) or (B, N) views (the projection's dtype and size); B may be 0.
+
+        Raises:
+            TypeError: ``x`` is not a float tensor (or not of the layer's dtype).
+            ValueError: a bad shape, NaN or infinite values, norms that overflow, or
+                non-finite distances (a damaged gallery).
+        """
+        check_float_tensor(x, "x")
+        if x.numel() and not bool(torch.isfinite(x.sum())):
+            check_finite(x, "x")  # names the NaN or infinite values; else only the sum overflowed
+        if getattr(self.projection, "unit_norm", False) and x.numel():
+            norms = torch.linalg.vector_norm(x.flatten(1), dim=1)
+            if not bool(torch.isfinite(norms).all()):
+                raise ValueError(
+                    f"x has views whose L2 norm overflows {x.dtype} (largest magnitude "
+                    f"{float(x.abs().max()):.3g}): a unit-norm projection would give zeros; rescale the views"
+                )
         with torch.no_grad():
             labels, poses, distances, index = self._search(x)
+        if not bool(torch.isfinite(distances).all()):
+            raise ValueError(
+                "the recognizer gave non-finite distances for finite views: the views' values (largest "
+                f"magnitude {float(x.abs().max()):.3g}) overflow {x.dtype} in the projection, or the gallery "
+                "or projection is damaged"
+            )
         return Recognition(labels, poses, distances, index)
