@@ -236,15 +236,17 @@ def estimate_correspondence(
         return Correspondence(empty, empty.clone(), mask, mask.clone(), empty.clone(), empty.clone())
     flow = optical_flow_tvl1 if method == "tvl1" else optical_flow_ilk
     d12, d21, v12, v21 = [], [], [], []
-    for a, b in zip(v1, v2, strict=True):
-        ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
-        # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
-        fwd = flow(ga, gb, **flow_kwargs)
-        d12.append(fwd[1])
-        v12.append(fwd[0])
-        bwd = flow(gb, ga, **flow_kwargs)
-        d21.append(bwd[1])
-        v21.append(bwd[0])
+    # A diverging flow is reported below with its cause, not as numpy's RuntimeWarnings.
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for a, b in zip(v1, v2, strict=True):
+            ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
+            # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
+            fwd = flow(ga, gb, **flow_kwargs)
+            d12.append(fwd[1])
+            v12.append(fwd[0])
+            bwd = flow(gb, ga, **flow_kwargs)
+            d21.append(bwd[1])
+            v21.append(bwd[0])
 
     def tensor(arrays: list[np.ndarray]) -> torch.Tensor:
         return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)

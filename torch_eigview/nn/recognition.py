@@ -187,6 +187,10 @@ class NearestNeighborRecognizer(nn.Module):
                     f"x has views whose L2 norm overflows {x.dtype} (largest magnitude "
                     f"{float(x.abs().max()):.3g}): a unit-norm projection would give zeros; rescale the views"
                 )
+        # A non-finite gallery point would win every search at distance 0 (-inf clamped):
+        # (G, k) values, checked per call, cheap next to the projection.
+        if not (bool(torch.isfinite(self.codes).all()) and bool(torch.isfinite(self.codes_sqnorm).all())):
+            raise ValueError("the recognizer's gallery codes are not finite: the recognizer is damaged")
         with torch.no_grad():
             labels, poses, distances, index = self._search(x)
         if not bool(torch.isfinite(distances).all()):
