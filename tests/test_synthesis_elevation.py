@@ -16,6 +16,7 @@ from torch_eigview.synthesis import (
     pair_geometry,
     synthesize_views,
 )
+
 from tests.helpers import rand
 
 OPTS = SynthesisOptions(flow="ilk")
@@ -23,7 +24,9 @@ OPTS = SynthesisOptions(flow="ilk")
 
 def test_no_trusted_foreground_falls_back_to_zero() -> None:
     seeds = torch.zeros(2, 1, 8, 10)  # all background: nothing to fit
-    with pytest.warns(ElevationFallbackWarning, match=r"seed pair 0: .*no trusted correspondence.*elevation=0"):
+    with pytest.warns(
+        ElevationFallbackWarning, match=r"seed pair 0: .*no trusted correspondence.*elevation=0"
+    ):
         (geo,) = pair_geometry(seeds, 10.0, OPTS)
     assert geo.elevation == 0.0
 

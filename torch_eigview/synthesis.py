@@ -305,7 +305,9 @@ def _auto_elevation(
     else:
         if math.isfinite(elevation) and abs(elevation) < MAX_AUTO_ELEVATION:
             return elevation
-        why = f"the fit gave elevation={elevation:g}, outside (-{MAX_AUTO_ELEVATION:g}, {MAX_AUTO_ELEVATION:g})"
+        why = (
+            f"the fit gave elevation={elevation:g}, outside (-{MAX_AUTO_ELEVATION:g}, {MAX_AUTO_ELEVATION:g})"
+        )
     warnings.warn(
         f"seed pair {pair}: elevation='auto' could not be measured ({why}); using elevation=0, "
         "the untilted camera (pass a number of degrees to choose another)",

@@ -37,11 +37,15 @@ def root(tmp_path: Path) -> Path:
         (["--alpha", "5", "--objects", "1-99999999999"], "EIGVIEW_MAX_OBJECTS"),
     ],
 )
-def test_coil_arguments(root: Path, args: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+def test_coil_arguments(
+    root: Path, args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert message in _err(["coil", "--root", str(root), *args], capsys)
 
 
-def test_coil_synth_views_bounded(root: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_coil_synth_views_bounded(
+    root: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     err = _err(["coil", "--root", str(root), "--alpha", "5", "--synth", "-20", "20", "1e-9"], capsys)
     assert "synth asks for 4e+10 views per object, more than the limit of 3600" in err
     assert "EIGVIEW_MAX_VIEWS" in err
@@ -69,6 +73,8 @@ def test_demo_alpha_named(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 @pytest.mark.parametrize("opset", ["99", "17", "x"])
-def test_export_opset_checked_before_reading_the_model(opset: str, capsys: pytest.CaptureFixture[str]) -> None:
+def test_export_opset_checked_before_reading_the_model(
+    opset: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     err = _err(["export", "--model", "missing.pt", "--out", "o.onnx", "--opset", opset], capsys)
     assert "--opset" in err and "missing.pt" not in err

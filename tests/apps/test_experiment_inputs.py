@@ -22,7 +22,11 @@ from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions
         (dict(synth=(math.nan, 20.0, 1.0)), ValueError, r"synth=\(nan, 20.0, 1.0\) must hold finite numbers"),
         (dict(synth=(-20.0, 20.0)), ValueError, r"synth must be \(start, stop, step\)"),
         (dict(test=(-45.0, math.inf)), ValueError, r"test=\(-45.0, inf\) must hold finite numbers"),
-        (dict(synth=(-20.0, 20.0, 1e-9)), ValueError, r"synth asks for 4e\+10 views per object.*EIGVIEW_MAX_VIEWS"),
+        (
+            dict(synth=(-20.0, 20.0, 1e-9)),
+            ValueError,
+            r"synth asks for 4e\+10 views per object.*EIGVIEW_MAX_VIEWS",
+        ),
         (dict(synth=(-20.0, 20.0, 0.0)), ValueError, r"synth step must be positive"),
         (dict(views="2"), ValueError, r"views must be 2 or 3, got '2'"),
         (dict(alpha=1e300), ValueError, r"alpha=1e\+300 must be an angle between seed views"),

@@ -24,6 +24,7 @@ from torch_eigview.io.onnx import export_recognizer
 from torch_eigview.io.onnx_check import check_recognizer_graph
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
+
 from tests.helpers import rand
 
 SHAPE = (1, 8, 8)
@@ -82,20 +83,24 @@ def test_escape() -> None:
     assert escape("plain name 7") == "plain name 7"
 
 
-def test_label_names_printed_escaped(model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_label_names_printed_escaped(
+    model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     names = json.dumps(["\x1b[2J", "b\nimg9.png\tlabel x", "c\x1b[31m\r"])
     bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", names))
     code, out, _ = _run(["predict", "--onnx", str(bad), *images], capsys)
     assert code == 0
     assert "\x1b" not in out and "\r" not in out and len(out.splitlines()) == len(images)
-    assert any(t in out for t in ("label \\x1b[2J\t", "label b\\nimg9.png\\tlabel x\t", "label c\\x1b[31m\\r\t"))
+    assert any(
+        t in out for t in ("label \\x1b[2J\t", "label b\\nimg9.png\\tlabel x\t", "label c\\x1b[31m\\r\t")
+    )
 
 
 def test_wrong_label_list_length_is_a_per_row_error(
     model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", json.dumps(["a"])))
-    code, out, err = _run(["predict", "--onnx", str(bad), *images, "--json", str(tmp_path / "p.json")], capsys)
+    code, _, err = _run(["predict", "--onnx", str(bad), *images, "--json", str(tmp_path / "p.json")], capsys)
     assert code == 1
     assert "outside its 1 label names" in err
     rows = json.loads((tmp_path / "p.json").read_text())
@@ -130,7 +135,9 @@ def _add_expand(m: onnx.ModelProto) -> None:
 def test_foreign_operator_refused(model: Path, tmp_path: Path) -> None:
     bad = _rewrite(model, tmp_path / "m.onnx", _add_expand)
     info = OnnxModelInfo.from_props({p.key: p.value for p in onnx.load(str(model)).metadata_props})
-    with pytest.raises(ValueError, match=r"operators a torch_eigview recognizer never has: \['ai.onnx:Expand'\]"):
+    with pytest.raises(
+        ValueError, match=r"operators a torch_eigview recognizer never has: \['ai.onnx:Expand'\]"
+    ):
         check_recognizer_graph(bad, info)
     check_recognizer_graph(model, info)  # the real export passes
 
@@ -157,7 +164,16 @@ def test_fifo_model_and_fifo_image_never_opened(model: Path, images: list[str], 
     os.mkfifo(fifo)
     fifo_model = tmp_path / "pipe.onnx"
     os.mkfifo(fifo_model)
-    argv = [sys.executable, "-m", "torch_eigview.apps.predict", "--onnx", str(model), images[0], str(fifo), images[1]]
+    argv = [
+        sys.executable,
+        "-m",
+        "torch_eigview.apps.predict",
+        "--onnx",
+        str(model),
+        images[0],
+        str(fifo),
+        images[1],
+    ]
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 1, proc.stderr
     assert "pipe.png is a FIFO (named pipe), not a regular file" in proc.stderr

@@ -20,7 +20,9 @@ def _write(folder: Path, *names: str) -> None:
 
 def test_stray_file_does_not_switch_the_pose_unit(tmp_path: Path) -> None:
     _write(tmp_path, *(f"obj{o}__{p}.png" for o in (1, 2) for p in (0, 1, 2)), "obj1__72.png")
-    with pytest.raises(ValueError, match=r"mixes pose conventions: objects \[1\] .* in obj1__72\.png") as info:
+    with pytest.raises(
+        ValueError, match=r"mixes pose conventions: objects \[1\] .* in obj1__72\.png"
+    ) as info:
         CoilFolder(tmp_path)
     assert "objects [2] have only P < 72" in str(info.value) and "pose_unit" in str(info.value)
     assert CoilFolder(tmp_path, pose_unit="degrees").poses(1) == [0.0, 1.0, 2.0, 72.0]
@@ -47,12 +49,18 @@ def test_consistent_conventions(tmp_path: Path) -> None:
 def test_entries_named_like_images_are_errors(tmp_path: Path, make: object, kind: str) -> None:
     _write(tmp_path, "obj1__0.png")
     make(tmp_path / "obj1__1.png")  # type: ignore[operator]
-    with pytest.raises(ValueError, match=f"not image files: COIL file .*obj1__1.png {kind}" if kind != "symbolic links" else kind):
+    with pytest.raises(
+        ValueError,
+        match=f"not image files: COIL file .*obj1__1.png {kind}" if kind != "symbolic links" else kind,
+    ):
         CoilFolder(tmp_path)
 
 
 def test_object_spec_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
-    with pytest.raises(ValueError, match=r"asks for 1e\+11 object ids, more than the limit of 100000; set the environment variable EIGVIEW_MAX_OBJECTS"):
+    with pytest.raises(
+        ValueError,
+        match=r"asks for 1e\+11 object ids, more than the limit of 100000; set the environment variable EIGVIEW_MAX_OBJECTS",
+    ):
         parse_object_spec("1-99999999999")
     monkeypatch.setenv("EIGVIEW_MAX_OBJECTS", "5")
     assert parse_object_spec("1-5") == [1, 2, 3, 4, 5]

@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from torch_eigview.decomposition import Eigenspace, KernelEigenspace, StreamingEigenspace
+
 from tests.helpers import rand
 
 

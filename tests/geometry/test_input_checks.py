@@ -17,6 +17,7 @@ from torch_eigview.geometry.correspondence import (
 )
 from torch_eigview.geometry.pose import estimate_elevation, orthographic_coefficients
 from torch_eigview.warp.novel_view import NovelViewWarp
+
 from tests.helpers import rand
 
 
@@ -58,7 +59,7 @@ def test_masks_of_the_wrong_size() -> None:
 
 
 def test_check_correspondence() -> None:
-    with pytest.raises(TypeError, match="correspondence must be a Correspondence .* got NoneType"):
+    with pytest.raises(TypeError, match=r"correspondence must be a Correspondence .* got NoneType"):
         check_correspondence(None)
     d = torch.zeros(1, 4, 5)
     bad = Correspondence(d, d, torch.ones(1, 4, 4, dtype=torch.bool), torch.ones(1, 4, 5, dtype=torch.bool))
@@ -80,5 +81,7 @@ def test_estimate_elevation_inputs() -> None:
 
 @pytest.mark.parametrize("alpha", [1e300, -400.0, 361.0])
 def test_alpha_beyond_a_turn(alpha: float) -> None:
-    with pytest.raises(ValueError, match=re.escape(f"alpha={alpha} must be an angle between seed views in [-360, 360]")):
+    with pytest.raises(
+        ValueError, match=re.escape(f"alpha={alpha} must be an angle between seed views in [-360, 360]")
+    ):
         orthographic_coefficients([0.0], alpha)

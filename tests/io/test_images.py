@@ -30,8 +30,15 @@ def test_fifo_refused_without_blocking(tmp_path: Path) -> None:
     fifo = tmp_path / "obj1__0.png"
     os.mkfifo(fifo)
     result: list[BaseException] = []
+
+    def read() -> None:
+        try:
+            read_image(fifo)
+        except ValueError as exc:
+            result.append(exc)
+
     # Opening a FIFO for reading blocks until a writer comes: run in a thread with a deadline.
-    worker = threading.Thread(target=lambda: result.append(pytest.raises(ValueError, read_image, fifo).value))
+    worker = threading.Thread(target=read, daemon=True)
     worker.start()
     worker.join(timeout=10)
     assert not worker.is_alive(), "read_image opened the FIFO and blocked"

@@ -274,7 +274,7 @@ def test_predict_refuses_non_finite_views() -> None:
 
 def test_predict_unit_norm_overflow_is_an_error() -> None:
     rec = _small_recognizer(unit_norm=True)
-    with pytest.raises(ValueError, match="L2 norm overflows torch.float32"):
+    with pytest.raises(ValueError, match=r"L2 norm overflows torch\.float32"):
         rec.predict(randn(2, N_FEATURES, seed=4, dtype=torch.float32) * 1e30)
 
 
@@ -289,4 +289,6 @@ def test_predict_damaged_gallery() -> None:
 def test_label_names_must_be_a_list(names: object) -> None:
     x = randn(2, N_FEATURES, seed=4)
     with pytest.raises(TypeError, match="label_names must be None or a list of names"):
-        NearestNeighborRecognizer.from_views(make_projection(), x, torch.tensor([0, 1]), torch.zeros(2), names)  # type: ignore[arg-type]
+        NearestNeighborRecognizer.from_views(
+            make_projection(), x, torch.tensor([0, 1]), torch.zeros(2), names
+        )  # type: ignore[arg-type]

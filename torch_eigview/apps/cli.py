@@ -123,13 +123,15 @@ def _gamma(text: str) -> float | str:
     return _word_or_float(text, "median", f"--gamma must be a number > 0 or 'median', got {text!r}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
-    sub = parser.add_subparsers(dest="command", required=True)
+def _add_coil(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     coil = sub.add_parser("coil", help="the COIL recognition experiment (paper Fig. 4(b))")
     coil.add_argument("--root", required=True, help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100)")
-    coil.add_argument("--alpha", type=_finite("--alpha"), required=True, help="angle between seed views, degrees")
-    coil.add_argument("--center", type=_finite("--center"), default=0.0, help="pose of the first seed view, degrees")
+    coil.add_argument(
+        "--alpha", type=_finite("--alpha"), required=True, help="angle between seed views, degrees"
+    )
+    coil.add_argument(
+        "--center", type=_finite("--center"), default=0.0, help="pose of the first seed view, degrees"
+    )
     coil.add_argument("--views", type=int, default=2, choices=(2, 3), help="seed views per object")
     coil.add_argument(
         "--synth",
@@ -139,7 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=("START", "STOP", "STEP"),
         help="synthesized angles for two seed views; each further seed extends the range by alpha",
     )
-    coil.add_argument("--test", type=_finite("--test"), nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP"))
+    coil.add_argument(
+        "--test", type=_finite("--test"), nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP")
+    )
     coil.add_argument("--components", type=_components, default=15, help="k, or an energy fraction in (0, 1)")
     coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
     coil.add_argument("--objects", type=_objects, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
@@ -179,10 +183,20 @@ def build_parser() -> argparse.ArgumentParser:
     coil.add_argument(
         "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_coil(sub)
     _add_export_and_predict(sub)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
-    demo.add_argument("--alpha", type=_finite("--alpha"), default=10.0, help="angle between the two seed views, degrees")
-    demo.add_argument("--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels")
+    demo.add_argument(
+        "--alpha", type=_finite("--alpha"), default=10.0, help="angle between the two seed views, degrees"
+    )
+    demo.add_argument(
+        "--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+    )
     demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
     demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
@@ -194,7 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--alpha", type=_finite("--alpha"), nargs="+", default=[5.0, 10.0, 15.0, 20.0, 30.0], help="degrees"
     )
     synth.add_argument("--views", type=int, nargs="+", choices=(2, 3), default=[2, 3], help="seed views N")
-    synth.add_argument("--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels")
+    synth.add_argument(
+        "--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+    )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")

@@ -137,7 +137,10 @@ class CoilExperiment:
         # Bounded before any list is built: a tiny step would ask for billions of views.
         start, stop = self.synth_range()
         if self.synth[2] > 0:  # else angle_range names the bad step
-            check_limit((stop - start) / self.synth[2] + 1, "synth", "views per object", *VIEW_LIMIT)
+            # "dense" takes the real views every 5 degrees over the same range.
+            step = min(self.synth[2], 5.0)
+            check_limit((stop - start) / step + 1, "synth", "views per object", *VIEW_LIMIT)
+        check_limit((self.test[1] - self.test[0]) / 5.0 + 1, "test", "test views per object", *VIEW_LIMIT)
         angle_range(*self.synth, name="synth")
         angle_range(self.test[0], self.test[1], 5.0, name="test")
 
@@ -193,7 +196,11 @@ class CoilExperiment:
             except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
                 raise ValueError(f"object {obj}: synthesis failed: {exc}") from exc
         for w in caught:  # re-issued with the object named (others unchanged)
-            message = f"object {obj}: {w.message}" if issubclass(w.category, ElevationFallbackWarning) else w.message
+            message = (
+                f"object {obj}: {w.message}"
+                if issubclass(w.category, ElevationFallbackWarning)
+                else w.message
+            )
             warnings.warn_explicit(message, w.category, w.filename, w.lineno)
         for key, value in out.seconds.items():
             seconds[key] += value

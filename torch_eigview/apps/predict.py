@@ -85,7 +85,9 @@ class OnnxRecognizer:
                 "predict needs a recognizer: export it with 'eigview export --recognizer'"
             )
         if not self.info.label_names:
-            raise ValueError(f"ONNX model {self.path!r} is a recognizer without label names (damaged metadata)")
+            raise ValueError(
+                f"ONNX model {self.path!r} is a recognizer without label names (damaged metadata)"
+            )
         check_recognizer_graph(self.path, self.info)
         try:
             self.session = onnxruntime.InferenceSession(self.path, providers=["CPUExecutionProvider"])
@@ -122,7 +124,9 @@ class OnnxRecognizer:
                     "(damaged model)"
                 )
             elif not (math.isfinite(p) and math.isfinite(d)):
-                out.append(f"image {name}: the model gave a non-finite pose {p} or distance {d} (damaged model)")
+                out.append(
+                    f"image {name}: the model gave a non-finite pose {p} or distance {d} (damaged model)"
+                )
             else:
                 out.append(Prediction(name, labels[i], p, d))
         return out
@@ -209,7 +213,9 @@ def run(args: argparse.Namespace) -> int:
                 continue
             if args.json:  # held for the file only: memory stays flat without it
                 predictions.append(row)
-            print(f"{escape(row.image)}\tlabel {escape(row.label)}\tpose {row.pose:g}\tdistance {row.distance:.6g}")
+            print(
+                f"{escape(row.image)}\tlabel {escape(row.label)}\tpose {row.pose:g}\tdistance {row.distance:.6g}"
+            )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump([p.to_json() for p in predictions], fh, indent=2)

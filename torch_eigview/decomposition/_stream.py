@@ -44,6 +44,7 @@ class Stream:
 
     def __init__(self, source: object, name: str = "blocks") -> None:
         if isinstance(source, torch.Tensor):
+            check_ndim(source, name, (2, 4), "(P, N) or (P, C, H, W)")
             source = blocks_of(source, 256)
         elif isinstance(source, Sequence) and not isinstance(source, str):
             blocks = list(source)

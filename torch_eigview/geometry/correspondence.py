@@ -22,7 +22,12 @@ from skimage.registration import optical_flow_ilk, optical_flow_tvl1
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
 
-__all__ = ["Correspondence", "check_correspondence", "correspondence_from_disparity", "estimate_correspondence"]
+__all__ = [
+    "Correspondence",
+    "check_correspondence",
+    "correspondence_from_disparity",
+    "estimate_correspondence",
+]
 
 _METHODS = ("tvl1", "ilk")
 
@@ -160,8 +165,16 @@ def correspondence_from_disparity(
             )
         check_finite(d21, "disparity_21")
     threshold = check_positive(threshold, "threshold")
-    v12 = _consistency(d12, d21, threshold) if valid_12 is None else _check_mask(valid_12, "valid_12", d12.shape)
-    v21 = _consistency(d21, d12, threshold) if valid_21 is None else _check_mask(valid_21, "valid_21", d12.shape)
+    v12 = (
+        _consistency(d12, d21, threshold)
+        if valid_12 is None
+        else _check_mask(valid_12, "valid_12", d12.shape)
+    )
+    v21 = (
+        _consistency(d21, d12, threshold)
+        if valid_21 is None
+        else _check_mask(valid_21, "valid_21", d12.shape)
+    )
     return Correspondence(d12, d21, v12, v21)
 
 

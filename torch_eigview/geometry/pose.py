@@ -251,9 +251,13 @@ def estimate_elevation(
     alpha = check_alpha(alpha)
     if center is not None and not math.isfinite(check_number(center, "center")):
         raise ValueError(f"center={center!r} must be finite or None")
-    if mask is not None and (not isinstance(mask, torch.Tensor) or mask.shape != correspondence.disparity_12.shape):
+    if mask is not None and (
+        not isinstance(mask, torch.Tensor) or mask.shape != correspondence.disparity_12.shape
+    ):
         got = tuple(mask.shape) if isinstance(mask, torch.Tensor) else type(mask).__name__
-        raise ValueError(f"mask must be a tensor of shape {tuple(correspondence.disparity_12.shape)}, got {got}")
+        raise ValueError(
+            f"mask must be a tensor of shape {tuple(correspondence.disparity_12.shape)}, got {got}"
+        )
     if correspondence.vertical_12 is None:
         raise ValueError("correspondence.vertical_12 is None: estimating the elevation needs a 2D flow")
     d12 = correspondence.disparity_12.double()

@@ -312,8 +312,8 @@ def compare_with_eager(
     import onnxruntime
 
     if not isinstance(images, torch.Tensor) or images.ndim != 4 or images.shape[0] == 0:
-        got = tuple(images.shape) if isinstance(images, torch.Tensor) else type(images).__name__
-        raise ValueError(f"images must be a (B, C, H, W) tensor with B >= 1 to compare, got {got}")
+        shape = tuple(images.shape) if isinstance(images, torch.Tensor) else type(images).__name__
+        raise ValueError(f"images must be a (B, C, H, W) tensor with B >= 1 to compare, got {shape}")
     if session is None:
         session = onnxruntime.InferenceSession(os.fspath(path), providers=["CPUExecutionProvider"])
     x = images.detach().cpu().float()

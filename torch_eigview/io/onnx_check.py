@@ -89,7 +89,9 @@ def _check_weights(graph: Any, source: str, budget: int) -> None:
         arr = numpy_helper.to_array(t)
         if arr.dtype.kind == "f" and not np.isfinite(arr).all():
             n_bad = int((~np.isfinite(arr)).sum())
-            raise ValueError(f"{source} is damaged: initializer {t.name!r} holds {n_bad} NaN or infinite values")
+            raise ValueError(
+                f"{source} is damaged: initializer {t.name!r} holds {n_bad} NaN or infinite values"
+            )
 
 
 def _check_intermediates(model: Any, source: str, budget: int) -> None:
@@ -130,7 +132,9 @@ def check_recognizer_graph(path: str | os.PathLike[str], info: OnnxModelInfo) ->
     budget = model_byte_limit()
     size = os.stat(path).st_size
     if size > budget:
-        raise ValueError(f"{source} is {size} bytes, more than {budget}; set {MODEL_BYTES[0]} to raise the limit")
+        raise ValueError(
+            f"{source} is {size} bytes, more than {budget}; set {MODEL_BYTES[0]} to raise the limit"
+        )
     try:
         model = onnx.load(os.fspath(path), load_external_data=False)
         onnx.checker.check_model(model)

@@ -178,6 +178,7 @@ class NearestNeighborRecognizer(nn.Module):
                 non-finite distances (a damaged gallery).
         """
         check_float_tensor(x, "x")
+        check_ndim(x, "x", (2, 4), "(B, N) or (B, C, H, W)")
         if x.numel() and not bool(torch.isfinite(x.sum())):
             check_finite(x, "x")  # names the NaN or infinite values; else only the sum overflowed
         if getattr(self.projection, "unit_norm", False) and x.numel():

@@ -205,7 +205,13 @@ def fit_distributed(
     if method not in _METHODS:
         raise ValueError(f"method={method!r} must be one of {_METHODS}")
     rank = dist.get_rank(group)
-    params = {"n_components": n_components, "method": method, "oversample": oversample, "n_iter": n_iter, "seed": seed}
+    params: dict[str, object] = {
+        "n_components": n_components,
+        "method": method,
+        "oversample": oversample,
+        "n_iter": n_iter,
+        "seed": seed,
+    }
     counts, feature_shape = _shard_layout(views, rank, group, params)
     n_views = sum(counts)
     image_shape = (feature_shape[0], feature_shape[1], feature_shape[2]) if len(feature_shape) == 3 else None
