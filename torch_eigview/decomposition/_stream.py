@@ -4,7 +4,6 @@ first pass (the mean)."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import torch
@@ -158,7 +157,8 @@ def stream_mean(stream: Stream) -> torch.Tensor:
             what = f"{stream.name}[{stream.index}]"
             check_finite(b, what)  # names the NaN or infinite values
             raise ValueError(f"{what} is too large: its float64 column sums overflow (rescale the views)")
-        peak = torch.linalg.vector_norm(b, ord=math.inf)
+        lo, hi = torch.aminmax(b)
+        peak = torch.maximum(-lo, hi)
         largest = peak if largest is None else torch.maximum(largest, peak)
         total = part if total is None else total + part
         count += b.shape[0]
