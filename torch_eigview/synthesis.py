@@ -251,6 +251,8 @@ def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[
     check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
     if seeds.shape[0] < 2:
         raise ValueError(f"seeds must hold at least 2 views, got V={seeds.shape[0]}")
+    if min(seeds.shape[1:]) < 1:
+        raise ValueError(f"seeds must have C, H, W >= 1, got shape {tuple(seeds.shape)}")
     check_finite(seeds, "seeds")
     return seeds, _steps(alpha, seeds.shape[0])
 

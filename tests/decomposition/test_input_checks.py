@@ -85,3 +85,18 @@ def test_unchanged_source_still_fits() -> None:
     ref = Eigenspace(4).fit(x)
     fit = StreamingEigenspace(4).fit(lambda: (x[i : i + 7].clone() for i in range(0, 30, 7)))
     torch.testing.assert_close(fit.eigenvalues_, ref.eigenvalues_)
+
+
+def test_kernel_parameters_that_overflow_are_named() -> None:
+    x = torch.tensor([[0.97], [0.71], [0.46]])
+    with pytest.raises(
+        ValueError, match=r"the rbf kernel of X, X is not finite in torch.float32 with gamma=1e\+300"
+    ):
+        KernelEigenspace(2, kernel="rbf", gamma=1e300).fit(x)
+
+
+def test_views_without_features() -> None:
+    with pytest.raises(ValueError, match=r"X must hold at least one value per view \(N >= 1\)"):
+        Eigenspace(1).fit(torch.zeros(3, 0))
+    with pytest.raises(ValueError, match=r"blocks\[0\] must hold at least one value per view"):
+        StreamingEigenspace(1).fit([torch.zeros(3, 0)])

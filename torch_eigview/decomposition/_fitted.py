@@ -36,7 +36,8 @@ def views_to_fit(X: object) -> tuple[torch.Tensor, tuple[int, int, int] | None]:
 
     Raises:
         TypeError: ``X`` is not a float32/float64 tensor.
-        ValueError: bad shape, P < 2 or non-finite values.
+        ValueError: bad shape, P < 2, N = 0, non-finite values, or values whose products
+            overflow or underflow the dtype.
     """
     x = check_float_tensor(X, "X")
     if x.dtype not in DTYPES:
@@ -44,8 +45,10 @@ def views_to_fit(X: object) -> tuple[torch.Tensor, tuple[int, int, int] | None]:
     check_ndim(x, "X", (2, 4), "(P, N) or (P, C, H, W)")
     if x.shape[0] < 2:
         raise ValueError(f"X must hold at least 2 views (rows), got P={x.shape[0]}")
+    if math.prod(x.shape[1:]) == 0:
+        raise ValueError(f"X must hold at least one value per view (N >= 1), got shape {tuple(x.shape)}")
     flat = x.detach().reshape(x.shape[0], -1)
-    # One max-|x| reduction (as cheap as a sum, ~10x cheaper than an elementwise mask)
+    # One min/max reduction (about as cheap as a sum, ~10x cheaper than an elementwise mask)
     # proves every value finite and the Gram products within the dtype's range, so an
     # overflow or underflow is named as such, not as "all views are identical".
     check_magnitude(flat, "X", max(flat.shape))

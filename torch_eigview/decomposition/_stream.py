@@ -4,6 +4,7 @@ first pass (the mean)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import torch
@@ -69,6 +70,10 @@ class Stream:
         if b.dtype not in DTYPES:
             raise TypeError(f"{what} must have dtype float32 or float64, got {b.dtype}")
         if self.feature_shape is None:
+            if math.prod(b.shape[1:]) == 0:
+                raise ValueError(
+                    f"{what} must hold at least one value per view (N >= 1), got shape {tuple(b.shape)}"
+                )
             self.feature_shape, self.dtype, self.device = tuple(b.shape[1:]), b.dtype, b.device
         elif tuple(b.shape[1:]) != self.feature_shape:
             raise ValueError(

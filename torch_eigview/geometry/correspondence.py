@@ -234,6 +234,8 @@ def estimate_correspondence(
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
     threshold = check_positive(threshold, "threshold")
+    if v1.shape[-3] < 1:
+        raise ValueError(f"view1 must have at least one channel, got shape {tuple(v1.shape)}")
     if v1.shape[-2] < 2 or v1.shape[-1] < 2:
         raise ValueError(
             f"view1 must be at least 2x2 pixels (the flow takes image gradients), got H={v1.shape[-2]}, "
