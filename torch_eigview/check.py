@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from collections.abc import Sequence
 
 import torch
@@ -22,10 +23,14 @@ __all__ = [
     "check_image_shape",
     "check_int",
     "check_kernel_params",
+    "check_limit",
+    "check_magnitude",
     "check_n_components",
     "check_ndim",
     "check_number",
+    "check_positive",
     "check_view_input",
+    "limit",
 ]
 
 
@@ -63,12 +68,16 @@ def check_number(value: object, name: str) -> float:
 
 
 def check_alpha(alpha: float, name: str = "alpha") -> float:
-    """Checks a seed-view angle in degrees: finite and not a multiple of 180."""
+    """Checks a seed-view angle in degrees: finite, within [-360, 360] and not a multiple of 180."""
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)):
         raise TypeError(f"{name} must be a number of degrees, got {type(alpha).__name__}")
     alpha = float(alpha)
     if not math.isfinite(alpha):
         raise ValueError(f"{name}={alpha} must be finite")
+    if abs(alpha) > 360:
+        # Beyond a turn the angle is another angle in disguise, and at 1e300 degrees a
+        # float's spacing exceeds the turn: sin(alpha) would be noise.
+        raise ValueError(f"{name}={alpha} must be an angle between seed views in [-360, 360] degrees")
     if abs(math.sin(math.radians(alpha))) < 1e-8:
         raise ValueError(f"{name}={alpha} must not be a multiple of 180 degrees (sin({name}) is zero)")
     return alpha
@@ -206,3 +215,78 @@ def check_kernel_params(gamma: object, degree: object, coef0: object) -> tuple[f
     if not math.isfinite(coef0):
         raise ValueError(f"coef0={coef0} must be finite")
     return gamma, degree, float(coef0)
+
+
+def check_positive(value: object, name: str, *, allow_zero: bool = False) -> float:
+    """A finite real number > 0 (>= 0 with ``allow_zero``) as a float; NaN is refused."""
+    number = check_number(value, name)
+    if not math.isfinite(number) or number < 0 or (number == 0 and not allow_zero):
+        sign, bound = ("non-negative", ">= 0") if allow_zero else ("positive", "> 0")
+        raise ValueError(f"{name}={value!r} must be {sign} (a finite number {bound})")
+    return number
+
+
+def limit(env: str, default: int) -> int:
+    """The limit named by the environment variable ``env`` (a positive int), else ``default``.
+
+    Limits bound the work an argument can ask for (views, pixels, objects); a caller that
+    means it raises them through the variable.
+    """
+    text = os.environ.get(env)
+    if text is None or text.strip() == "":
+        return default
+    try:
+        value = int(text)
+    except ValueError:
+        raise ValueError(f"environment variable {env}={text!r} must be a positive integer") from None
+    if value < 1:
+        raise ValueError(f"environment variable {env}={text!r} must be a positive integer")
+    return value
+
+
+def check_limit(count: float, name: str, what: str, env: str, default: int) -> None:
+    """Raises ValueError when ``count`` ``what`` (asked for by argument ``name``) exceed the
+    limit of :func:`limit`; the message says the limit and how to raise it."""
+    bound = limit(env, default)
+    if not count <= bound:  # NaN counts as over the limit
+        raise ValueError(
+            f"{name} asks for {count:.6g} {what}, more than the limit of {bound}; "
+            f"set the environment variable {env} to raise it"
+        )
+
+
+def check_magnitude(x: torch.Tensor, name: str, n_terms: int) -> None:
+    """Checks that products of ``x``'s values, summed ``n_terms`` at a time (a Gram or scatter
+    entry), neither overflow nor underflow ``x``'s dtype; also that ``x`` is finite.
+
+    An overflow or underflow would otherwise surface later as a false cause ("all views are
+    identical", a failed eigensolver); the message names the largest magnitude and the range.
+    The largest magnitude is one min/max reduction, without a temporary copy of ``x``.
+
+    Raises:
+        ValueError: NaN or infinite values, or a magnitude outside the dtype's usable range.
+    """
+    if x.numel() == 0:
+        return
+    smallest, biggest = torch.aminmax(x)  # NaN propagates; ~20x faster than an inf-norm on CPU
+    largest = max(-float(smallest), float(biggest))
+    if not math.isfinite(largest):
+        check_finite(x, name)  # names the NaN or infinite values
+    if largest == 0:
+        return
+    info = torch.finfo(x.dtype)
+    # Centred values reach 2·max|x|; a sum of n_terms products must stay below the max.
+    high = math.sqrt(info.max / (4.0 * max(n_terms, 1)))
+    # The rank tolerance is ~eps·max² (decomposition.linalg.rank_tolerance); below
+    # sqrt(tiny / eps) that scale is subnormal and the small eigenvalues lose their bits.
+    low = math.sqrt(info.tiny / info.eps)
+    if largest > high:
+        raise ValueError(
+            f"{name} is too large for {x.dtype}: its largest magnitude {largest:.3g} exceeds {high:.3g}, "
+            f"so products of its values overflow; rescale it (e.g. to [0, 1]) or use float64"
+        )
+    if largest < low:
+        raise ValueError(
+            f"{name} is too small for {x.dtype}: its largest magnitude {largest:.3g} is below {low:.3g}, "
+            f"so products of its values underflow; rescale it (e.g. to [0, 1]) or use float64"
+        )

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -38,6 +39,8 @@ from torch_eigview.check import (
     check_float_tensor,
     check_int,
     check_ndim,
+    check_number,
+    check_positive,
 )
 from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
@@ -46,6 +49,8 @@ from torch_eigview.warp.normalize import foreground_mask, normalize_extent
 from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
+    "MAX_AUTO_ELEVATION",
+    "ElevationFallbackWarning",
     "PairGeometry",
     "SynthesisOptions",
     "SynthesizedViews",
@@ -55,6 +60,12 @@ __all__ = [
 ]
 
 _FAST_TVL1 = {"num_warp": 3, "num_iter": 5}
+# |elevation| an "auto" estimate may have: what NovelViewWarp accepts, strictly below 90.
+MAX_AUTO_ELEVATION = 89.0
+
+
+class ElevationFallbackWarning(UserWarning):
+    """``elevation="auto"`` could not measure a seed pair's elevation and used 0."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +76,10 @@ class SynthesisOptions:
         flow: scikit-image flow for the correspondences, ``"tvl1"`` or ``"ilk"``.
         threshold: forward–backward consistency tolerance in pixels.
         elevation: camera elevation in degrees (0: the paper's orthographic camera, rows
-            stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow.
+            stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow; a
+            pair whose flow gives no trusted foreground match, or a fit at
+            ``MAX_AUTO_ELEVATION`` or beyond (saturated), falls back to 0 with an
+            :class:`ElevationFallbackWarning`.
         extent: size-normalize each synthesized view as the data set's images are
             (:func:`~torch_eigview.warp.normalize.normalize_extent`; COIL's processed set is).
         background: intensity below which a pixel is background (for ``extent`` and the
@@ -107,14 +121,22 @@ class SynthesisOptions:
     def __post_init__(self) -> None:
         if self.flow not in ("tvl1", "ilk"):
             raise ValueError(f"flow must be 'tvl1' or 'ilk', got {self.flow!r}")
-        if isinstance(self.elevation, str) and self.elevation != "auto":
-            raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
+        if isinstance(self.elevation, str):
+            if self.elevation != "auto":
+                raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
+        elif not abs(check_number(self.elevation, "elevation")) < 90:  # NaN fails too
+            raise ValueError(f"elevation={self.elevation!r} must be an angle in degrees in (-90, 90)")
         if not isinstance(self.silhouette, bool):
             raise TypeError(f"silhouette must be a bool, got {type(self.silhouette).__name__}")
         if self.blend not in BLENDS:
             raise ValueError(f"blend must be one of {BLENDS}, got {self.blend!r}")
-        if not self.threshold > 0:
-            raise ValueError(f"threshold={self.threshold} must be positive")
+        check_positive(self.threshold, "threshold")
+        if not check_number(self.max_stretch, "max_stretch") > 0:  # inf: no depth jumps
+            raise ValueError(f"max_stretch={self.max_stretch!r} must be a number > 0")
+        if not math.isfinite(check_number(self.background, "background")):
+            raise ValueError(f"background={self.background!r} must be finite")
+        if self.center is not None and not math.isfinite(check_number(self.center, "center")):
+            raise ValueError(f"center={self.center!r} must be finite or None")
 
 
 @dataclass
@@ -229,6 +251,8 @@ def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[
     check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
     if seeds.shape[0] < 2:
         raise ValueError(f"seeds must hold at least 2 views, got V={seeds.shape[0]}")
+    if min(seeds.shape[1:]) < 1:
+        raise ValueError(f"seeds must have C, H, W >= 1, got shape {tuple(seeds.shape)}")
     check_finite(seeds, "seeds")
     return seeds, _steps(alpha, seeds.shape[0])
 
@@ -260,22 +284,39 @@ def pair_geometry(
         )
         elevation = opts.elevation
         if elevation == "auto":
-            elevation = _measured_elevation(corr, steps[n], foreground_mask(v1, opts.background), opts.center)
+            elevation = _auto_elevation(corr, steps[n], foreground_mask(v1, opts.background), opts.center, n)
         out.append(PairGeometry(corr, float(elevation), time.perf_counter() - t0))
     return out
 
 
-def _measured_elevation(
-    corr: Correspondence, alpha: float, mask: torch.Tensor, center: float | None
+def _auto_elevation(
+    corr: Correspondence, alpha: float, mask: torch.Tensor, center: float | None, pair: int
 ) -> float:
-    """The pair's elevation fit, or 0 (the untilted camera) where the flow gives none: no
-    trusted correspondence, a non-finite fit, or a saturated one (|sin| >= 1, ±90°, where
-    the vertical flow is not a tilt's: the warp takes only (−90°, 90°))."""
+    """The elevation measured from one pair's vertical flow, or 0 (the paper's untilted
+    camera) with a warning when the flow cannot give one.
+
+    Two cases fall back: no trusted foreground correspondence to fit (a featureless or
+    badly matched pair), and a fit that saturates at ±90 degrees, which no turntable camera
+    has and the warp refuses; both are unreliable flow, not a tilted camera, so the pair is
+    synthesized as the untilted orthographic model, as with ``elevation=0``.
+    """
     try:
         elevation = float(estimate_elevation(corr, alpha, center=center, mask=mask)[0])
-    except ValueError:
-        return 0.0
-    return elevation if math.isfinite(elevation) and abs(elevation) < 90 else 0.0
+    except ValueError as exc:  # no trusted pixel with depth under the mask
+        why = str(exc)
+    else:
+        if math.isfinite(elevation) and abs(elevation) < MAX_AUTO_ELEVATION:
+            return elevation
+        why = (
+            f"the fit gave elevation={elevation:g}, outside (-{MAX_AUTO_ELEVATION:g}, {MAX_AUTO_ELEVATION:g})"
+        )
+    warnings.warn(
+        f"seed pair {pair}: elevation='auto' could not be measured ({why}); using elevation=0, "
+        "the untilted camera (pass a number of degrees to choose another)",
+        ElevationFallbackWarning,
+        stacklevel=3,
+    )
+    return 0.0
 
 
 def synthesize_views(

@@ -310,3 +310,45 @@ def test_interpolate_pose_must_be_bool() -> None:
     rec = circle_recognizer(10.0, 360.0)
     with pytest.raises(TypeError, match="interpolate_pose must be a bool, got str"):
         rec.predict(on_circle([1.0]), interpolate_pose="yes")  # type: ignore[arg-type]
+
+
+# --- predict-side checks (forward stays export-friendly) ------------------------------
+
+
+def _small_recognizer(unit_norm: bool = False) -> NearestNeighborRecognizer:
+    x = randn(6, N_FEATURES, seed=3, dtype=torch.float32)
+    proj = make_projection(torch.float32, unit_norm=unit_norm)
+    return NearestNeighborRecognizer.from_views(proj, x, torch.arange(6) % 2, torch.arange(6.0))
+
+
+def test_predict_refuses_non_finite_views() -> None:
+    rec = _small_recognizer()
+    x = randn(2, N_FEATURES, seed=4, dtype=torch.float32)
+    x[1, 3] = float("nan")
+    with pytest.raises(ValueError, match=r"x must be finite, got 1 NaN"):
+        rec.predict(x)
+    labels, _, distances = rec(x)  # the module itself does not check: NaN out, no error
+    assert not bool(torch.isfinite(distances).all()) and labels.shape == (2,)
+    assert rec.predict(x[:0]).distances.shape == (0,)
+
+
+def test_predict_unit_norm_overflow_is_an_error() -> None:
+    rec = _small_recognizer(unit_norm=True)
+    with pytest.raises(ValueError, match=r"L2 norm overflows torch\.float32"):
+        rec.predict(randn(2, N_FEATURES, seed=4, dtype=torch.float32) * 1e30)
+
+
+def test_predict_damaged_gallery() -> None:
+    rec = _small_recognizer()
+    rec.codes[0, 0] = float("inf")
+    with pytest.raises(ValueError, match="gallery codes are not finite"):
+        rec.predict(randn(2, N_FEATURES, seed=4, dtype=torch.float32))
+
+
+@pytest.mark.parametrize("names", ["ab", {0: "a", 1: "b"}, 7], ids=["str", "dict", "int"])
+def test_label_names_must_be_a_list(names: object) -> None:
+    x = randn(2, N_FEATURES, seed=4)
+    with pytest.raises(TypeError, match="label_names must be None or a list of names"):
+        NearestNeighborRecognizer.from_views(
+            make_projection(), x, torch.tensor([0, 1]), torch.zeros(2), names
+        )  # type: ignore[arg-type]

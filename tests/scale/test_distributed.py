@@ -61,6 +61,11 @@ def _worker(rank: int, world: int, port: int, out: str) -> None:
                 results[case] = "no error"
             except ValueError as err:
                 results[case] = str(err)
+        try:  # a different k on one rank would abort a later collective of another size
+            fit_distributed(_shard(rank), K + rank)
+            results["n_components"] = "no error"
+        except ValueError as err:
+            results["n_components"] = str(err)
         # The group still works after the errors, on every rank.
         results["after"] = fit_distributed(_shard(rank), K).eigenvalues_
     finally:
@@ -117,6 +122,7 @@ def test_bad_input_raises_on_every_rank(ranks: list[dict[str, object]]) -> None:
         assert "rank 1: views holds no views" in str(result["empty"])
         assert "same view shape and dtype on every rank" in str(result["size"])
         assert "(P_r, 299)" in str(result["size"])
+        assert f"rank 1: n_components={K + 1} differs from rank 0's {K}" in str(result["n_components"])
         torch.testing.assert_close(result["after"], result["exact"][2])  # type: ignore[index]
 
 

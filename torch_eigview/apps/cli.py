@@ -11,7 +11,9 @@ Torch-using modules are imported inside the subcommands: ``predict`` never impor
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from typing import TYPE_CHECKING, TypeVar
@@ -27,6 +29,10 @@ if TYPE_CHECKING:
 __all__ = ["main", "progress_bar"]
 
 T = TypeVar("T")
+
+MIN_OPSET = 18  # what torch_eigview.io.onnx exports
+# Image side of the rendered demo and synth scenes: memory grows with its square.
+SIZE_LIMIT = ("EIGVIEW_MAX_IMAGE_SIDE", 512)
 
 
 def _components(text: str) -> int | float:
@@ -55,6 +61,57 @@ def _word_or_float(text: str, word: str, message: str) -> float | str:
         raise argparse.ArgumentTypeError(message) from None
 
 
+def _finite(flag: str) -> Callable[[str], float]:
+    """An argparse type: a finite number, the error naming ``flag`` (never an internal name)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{flag} must be a finite number, got {text!r}")
+        return value
+
+    return parse
+
+
+def _bounded_int(flag: str, minimum: int, limit: tuple[str, int] | None = None) -> Callable[[str], int]:
+    """An argparse type: an int >= ``minimum`` and at most ``limit`` (an environment variable
+    that raises it, and its default), the error naming ``flag``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{flag}={value} must be >= {minimum}")
+        if limit is not None:
+            from torch_eigview.check import check_limit  # imports torch: not on predict's path
+
+            try:
+                check_limit(value, flag, "pixels per image side", *limit)
+            except ValueError as exc:
+                raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+
+    return parse
+
+
+def _opset(text: str) -> int:
+    import onnx
+
+    newest = onnx.defs.onnx_opset_version()
+    value = _bounded_int("--opset", MIN_OPSET)(text)
+    if value > newest:
+        # The exporter would silently write another opset than the one asked for.
+        raise argparse.ArgumentTypeError(
+            f"--opset={value} must be at most {newest}, the newest opset of the installed onnx {onnx.__version__}"
+        )
+    return value
+
+
 def _elevation(text: str) -> float | str:
     return _word_or_float(text, "auto", f"--elevation must be 'auto' or degrees, got {text!r}")
 
@@ -72,9 +129,7 @@ def _gamma(text: str) -> float | str:
     return _word_or_float(text, "median", f"--gamma must be a number > 0 or 'median', got {text!r}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
-    sub = parser.add_subparsers(dest="command", required=True)
+def _add_coil(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     coil = sub.add_parser("coil", help="the COIL recognition experiment (paper Fig. 4(b))")
     coil.add_argument(
         "--root",
@@ -84,11 +139,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     coil.add_argument(
         "--alpha",
-        type=float,
+        type=_finite("--alpha"),
         default=None,
         help="angle between seed views, degrees (required without --seeds)",
     )
-    coil.add_argument("--center", type=float, default=0.0, help="pose of the first seed view, degrees")
+    coil.add_argument(
+        "--center", type=_finite("--center"), default=0.0, help="pose of the first seed view, degrees"
+    )
     coil.add_argument(
         "--views", type=int, default=None, choices=(2, 3), help="seed views per object (default 2)"
     )
@@ -109,20 +166,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     coil.add_argument(
         "--dense-step",
-        type=float,
+        type=_finite("--dense-step"),
         default=None,
         metavar="S",
         help="with --seeds and --method dense: real views every S degrees (default about 180/M)",
     )
     coil.add_argument(
         "--synth",
-        type=float,
+        type=_finite("--synth"),
         nargs=3,
         default=(-20.0, 20.0, 1.0),
         metavar=("START", "STOP", "STEP"),
         help="synthesized angles for two seed views; each further seed extends the range by alpha",
     )
-    coil.add_argument("--test", type=float, nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP"))
+    coil.add_argument(
+        "--test", type=_finite("--test"), nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP")
+    )
     coil.add_argument("--components", type=_components, default=15, help="k, or an energy fraction in (0, 1)")
     coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
     coil.add_argument("--objects", type=_objects, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
@@ -142,6 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--silhouette",
         action="store_true",
         help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
+    )
+    coil.add_argument(
+        "--pose-unit",
+        choices=("auto", "index", "degrees"),
+        default="auto",
+        help="file pose P: an index (COIL-20, 5*P degrees), degrees (COIL-100), or auto (default)",
     )
     coil.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
@@ -163,12 +228,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="where the views, the warp, the eigenspace and recognition run (the optical flow "
         "stays on the CPU: scikit-image)",
     )
-    _add_export_and_predict(sub)
     _add_quiet(coil)
     _add_threads(coil)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_coil(sub)
+    _add_export_and_predict(sub)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
-    demo.add_argument("--alpha", type=float, default=10.0, help="angle between the two seed views, degrees")
-    demo.add_argument("--size", type=int, default=64, help="image side in pixels")
+    demo.add_argument(
+        "--alpha", type=_finite("--alpha"), default=10.0, help="angle between the two seed views, degrees"
+    )
+    demo.add_argument(
+        "--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+    )
     demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
     demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
@@ -179,10 +254,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--camera", choices=("orthographic", "affine", "perspective"), default="orthographic")
     synth.add_argument(
-        "--alpha", type=float, nargs="+", default=[5.0, 10.0, 15.0, 20.0, 30.0], help="degrees"
+        "--alpha", type=_finite("--alpha"), nargs="+", default=[5.0, 10.0, 15.0, 20.0, 30.0], help="degrees"
     )
     synth.add_argument("--views", type=int, nargs="+", choices=(2, 3), default=[2, 3], help="seed views N")
-    synth.add_argument("--size", type=int, default=64, help="image side in pixels")
+    synth.add_argument(
+        "--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+    )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
@@ -246,7 +323,7 @@ def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentPar
         action="store_true",
         help="export the whole recognizer (images -> label, pose, distance), not just the projection",
     )
-    export.add_argument("--opset", type=int, default=18, help="ONNX opset (>= 18)")
+    export.add_argument("--opset", type=_opset, default=MIN_OPSET, help="ONNX opset (>= 18)")
     predict = sub.add_parser("predict", help="recognize images with an exported ONNX recognizer (no torch)")
     add_arguments(predict)
 
@@ -312,7 +389,7 @@ def _run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.synthesis import SynthesisOptions
 
     check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
-    folder = _on_device(CoilFolder(find_coil_root(args.root)), _device(args.device))
+    folder = _on_device(CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit), _device(args.device))
     _check_circle_flags(args)
     experiment = CoilExperiment(
         alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
@@ -432,6 +509,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return bench_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
+    with warnings.catch_warnings():  # restores the formatter for in-process callers
+        warnings.showwarning = _show_warning
+        return _dispatch(parser, args)
+
+
+def _show_warning(message: Warning | str, category: type[Warning], *_: object, **__: object) -> None:
+    """Warnings as one line on stderr, like the errors (no source line of the package)."""
+    print(f"eigview: warning: {message}", file=sys.stderr)
+
+
+def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     try:
         runs = {"coil": _run_coil, "demo": _run_demo, "synth": _run_synth}
         if args.command in runs:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
@@ -35,15 +36,26 @@ import torch
 
 from torch_eigview.apps.circle import CircleLayout, circle_layout, synthesize_circle
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
-from torch_eigview.check import check_alpha, check_int, check_n_components
+from torch_eigview.check import check_alpha, check_int, check_limit, check_n_components, check_number
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
-from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions, synthesize_views
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
 METHODS = ("nvs", "sparse", "dense")
+# Views synthesized per object: every 0.1 degree over the whole turn by default.
+VIEW_LIMIT = ("EIGVIEW_MAX_VIEWS", 3600)
+
+
+def _check_angles(values: object, name: str, size: int, layout: str) -> None:
+    """``values`` must be ``size`` finite numbers of degrees, ``layout`` naming them."""
+    if not isinstance(values, (tuple, list)) or len(values) != size:
+        raise ValueError(f"{name} must be {layout} in degrees, got {values!r}")
+    for v in values:
+        if not math.isfinite(check_number(v, name)):
+            raise ValueError(f"{name}={tuple(values)!r} must hold finite numbers of degrees {layout}")
 
 
 @dataclass
@@ -138,20 +150,27 @@ class CoilExperiment:
             raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
         if self.seeds is None:  # the full circle sets its own angles
             check_alpha(self.alpha)
+        if self.views not in (2, 3) or isinstance(self.views, bool):
+            raise ValueError(f"views must be 2 or 3, got {self.views!r}")
+        if not math.isfinite(check_number(self.center, "center")):
+            raise ValueError(f"center={self.center!r} must be a finite number of degrees")
+        _check_angles(self.synth, "synth", 3, "(start, stop, step)")
+        _check_angles(self.test, "test", 2, "(start, stop)")
         if self.seeds is None and abs(self.alpha) * (self.views - 1) >= 180:
             raise ValueError(f"alpha={self.alpha} with {self.views} seed views spans 180 degrees or more")
         check_n_components(self.components)
-        if len(self.synth) != 3:
-            raise ValueError(f"synth must be (start, stop, step) in degrees, got {self.synth!r}")
-        if len(self.test) != 2:
-            raise ValueError(f"test must be (start, stop) in degrees, got {self.test!r}")
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if self.views not in (2, 3):
-            raise ValueError(f"views must be 2 or 3, got {self.views}")
-        angle_range(*self.synth, name="synth")
         if not isinstance(self.synth_follows_seeds, bool):
             raise TypeError(f"synth_follows_seeds must be a bool, got {self.synth_follows_seeds!r}")
+        # Bounded before any list is built: a tiny step would ask for billions of views.
+        start, stop = self.synth_range()
+        if self.synth[2] > 0:  # else angle_range names the bad step
+            # "dense" takes the real views every 5 degrees over the same range.
+            step = min(self.synth[2], 5.0)
+            check_limit((stop - start) / step + 1, "synth", "views per object", *VIEW_LIMIT)
+        check_limit((self.test[1] - self.test[0]) / 5.0 + 1, "test", "test views per object", *VIEW_LIMIT)
+        angle_range(*self.synth, name="synth")
         angle_range(self.test[0], self.test[1], 5.0, name="test")
         if self.seeds is not None:
             check_int(self.seeds, "seeds", minimum=2)
@@ -183,8 +202,14 @@ class CoilExperiment:
         start, stop = self.synth_range()
         return angle_range(start, stop, self.synth[2] if step is None else step, "synth")
 
+    @property
+    def _center(self) -> float:
+        """``center`` wrapped to (-180, 180] in float64: poses then stay exact in the views'
+        float32 (1e9 degrees would not)."""
+        return 180.0 - (180.0 - float(self.center)) % 360.0
+
     def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
-        return folder.images(obj, [self.center + n * self.alpha for n in range(self.views)])
+        return folder.images(obj, [self._center + n * self.alpha for n in range(self.views)])
 
     def circle(
         self,
@@ -202,7 +227,7 @@ class CoilExperiment:
             raise ValueError("circle() needs seeds (the full circle's number of seed views), got None")
         objs = folder.objects if objects is None else objects
         common = set.intersection(*(set(folder.poses(obj)) for obj in objs))
-        return circle_layout(sorted(common), self.center, self.seeds, self.method, self.dense_step, names)
+        return circle_layout(sorted(common), self._center, self.seeds, self.method, self.dense_step, names)
 
     def _gallery_of(
         self,
@@ -214,11 +239,11 @@ class CoilExperiment:
     ) -> tuple[torch.Tensor, int, list[float]]:
         """``(views, obj, poses)`` of one object's gallery; adds the synthesis's times to
         ``seconds`` and its elevations to ``elevations``."""
-        c = self.center
+        c = self._center
         if layout is not None:
             if self.method != "nvs":
                 return folder.images(obj, layout.real), obj, layout.real
-            out = synthesize_circle(folder.images(obj, layout.seeds), self.synth[2], self.synthesis)
+            seeds = folder.images(obj, layout.seeds)
         elif self.method == "sparse":
             angles = [c + n * self.alpha for n in range(self.views)]
             return folder.images(obj, angles), obj, angles
@@ -226,7 +251,23 @@ class CoilExperiment:
             angles = [c + a for a in self.synth_angles(5.0)]
             return folder.images(obj, angles), obj, angles
         else:
-            out = synthesize_views(self._seeds(folder, obj), self.alpha, self.synth_angles(), self.synthesis)
+            seeds = self._seeds(folder, obj)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ElevationFallbackWarning)
+            try:
+                if layout is not None:
+                    out = synthesize_circle(seeds, self.synth[2], self.synthesis)
+                else:
+                    out = synthesize_views(seeds, self.alpha, self.synth_angles(), self.synthesis)
+            except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
+                raise ValueError(f"object {obj}: synthesis failed: {exc}") from exc
+        for w in caught:  # re-issued with the object named (others unchanged)
+            message = (
+                f"object {obj}: {w.message}"
+                if issubclass(w.category, ElevationFallbackWarning)
+                else w.message
+            )
+            warnings.warn_explicit(message, w.category, w.filename, w.lineno)
         for key, value in out.seconds.items():
             seconds[key] += value
         elevations[obj] = out.elevations
@@ -271,7 +312,7 @@ class CoilExperiment:
 
         t0 = time.perf_counter()
         if layout is None:
-            test_poses = [self.center + a for a in angle_range(self.test[0], self.test[1], 5.0, "test")]
+            test_poses = [self._center + a for a in angle_range(self.test[0], self.test[1], 5.0, "test")]
         else:
             test_poses = layout.tests
         tests = self._tests(folder, objects, test_poses, x.dtype)
@@ -296,5 +337,5 @@ class CoilExperiment:
     ) -> Iterator[tuple[int, int, torch.Tensor, torch.Tensor]]:
         """Per object its real views at ``test_poses`` (degrees) and their poses (wrapped), read lazily."""
         for obj in objects:
-            truth = wrap_degrees(torch.tensor(test_poses, dtype=dtype))
+            truth = wrap_degrees(torch.tensor(test_poses, dtype=torch.float64)).to(dtype)
             yield obj, obj, folder.images(obj, truth.tolist()), truth

@@ -2,9 +2,12 @@
 
 Imports onnxruntime, numpy and scikit-image only (``import torch_eigview`` is lazy), so it
 runs where torch is not installed. Images are read as :class:`~torch_eigview.datasets.coil.CoilFolder`
-reads them (:mod:`torch_eigview.io.images`) and checked against the shape in the model's
-metadata; a file that cannot be used is reported on stderr and the others go on (exit
-status 1 if any failed, 0 otherwise, 2 for a bad model or bad arguments).
+reads them (:mod:`torch_eigview.io.images`: special files refused unopened, float pixels in
+[0, 1]) and checked against the shape in the model's metadata, 64 at a time, so memory stays
+flat in the number of images; a file that cannot be used, or a row the model answers with a
+label index outside its names or a non-finite distance, is reported on stderr and the others
+go on (exit status 1 if any failed, 0 otherwise, 2 for a bad model or bad arguments). The
+graph is checked before onnxruntime runs it (:mod:`torch_eigview.io.onnx_check`).
 
 Usage::
 
@@ -15,21 +18,23 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from torch_eigview.files import check_output_path, write_json
-from torch_eigview.io.images import read_image, to_unit_float
+from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
+from torch_eigview.io.onnx_check import check_recognizer_graph
 from torch_eigview.io.onnx_checksum import verify_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.lazy import require
 
-__all__ = ["OnnxRecognizer", "Prediction", "add_arguments", "main", "run"]
+__all__ = ["OnnxRecognizer", "Prediction", "add_arguments", "escape", "main", "read_info", "run"]
 
 _BATCH = 64
 
@@ -47,42 +52,57 @@ class Prediction:
         return {"image": self.image, "label": self.label, "pose": self.pose, "distance": self.distance}
 
 
+def escape(text: str) -> str:
+    """``text`` with control and other non-printable characters escaped as ``repr`` would
+    (``\\n``, ``\\x1b``, ``\\u2028``), so that a label name or a file name from a file cannot
+    forge output lines or send terminal escapes."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 class OnnxRecognizer:
     """An exported recognizer in an onnxruntime session (CPU).
+
+    The file is checked before onnxruntime loads it: a regular file (never a FIFO or a
+    device), and a graph that :func:`~torch_eigview.io.onnx_check.check_recognizer_graph`
+    accepts (operators, inputs and outputs, finite weights, sizes within a budget).
 
     Args:
         path: a ``.onnx`` file written by ``eigview export --recognizer``.
 
     Raises:
-        ValueError: the file is missing, not an ONNX model, not exported by torch_eigview,
-            corrupted (checksum mismatch), or a projection rather than a recognizer.
+        ValueError: the file is missing or not a regular file, not an ONNX model, not
+            exported by torch_eigview, corrupted (checksum mismatch), a projection rather
+            than a recognizer, or a graph that is not a recognizer's.
         ImportError: onnxruntime is not installed (the message names the extra).
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         onnxruntime = require("onnxruntime", "onnx", "eigview predict")
         self.path = os.fspath(path)
-        if not os.path.isfile(self.path):
-            raise ValueError(f"ONNX model {self.path!r} does not exist or is not a file")
-        try:
-            self.session = onnxruntime.InferenceSession(self.path, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # onnxruntime raises its own Fail/InvalidProtobuf types
-            raise ValueError(f"ONNX model {self.path!r} could not be loaded by onnxruntime: {exc}") from exc
-        props = self.session.get_modelmeta().custom_metadata_map
-        self.info = OnnxModelInfo.from_props(props, source=f"ONNX model {self.path!r}")
-        verify_checksum(self.path)  # after the two checks above, which name a foreign file better
+        check_regular_file(self.path, "ONNX model")
+        self.info = read_info(self.path)
+        verify_checksum(self.path)  # after read_info, which names a foreign file better
         if self.info.kind != "recognizer":
             raise ValueError(
                 f"ONNX model {self.path!r} is a {self.info.kind} (coefficients only); "
                 "predict needs a recognizer: export it with 'eigview export --recognizer'"
             )
+        if not self.info.label_names:
+            raise ValueError(
+                f"ONNX model {self.path!r} is a recognizer without label names (damaged metadata)"
+            )
+        check_recognizer_graph(self.path, self.info)
+        try:
+            self.session = onnxruntime.InferenceSession(self.path, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own Fail/InvalidProtobuf types
+            raise ValueError(f"ONNX model {self.path!r} could not be loaded by onnxruntime: {exc}") from exc
         self.input_name = self.session.get_inputs()[0].name
 
     def load(self, path: str) -> np.ndarray:
         """Reads one image as (C, H, W) float32 in [0, 1], checked against the model's input size.
 
         Raises:
-            ValueError: unreadable file, or a shape other than the model's (C, H, W).
+            ValueError: not a regular file, unreadable, or a shape other than the model's (C, H, W).
         """
         arr = read_image(path)
         if tuple(arr.shape) != self.info.image_shape:
@@ -92,21 +112,59 @@ class OnnxRecognizer:
             )
         return to_unit_float(arr, np.float32)
 
+    def predict_rows(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction | str]:
+        """Recognizes (B, C, H, W) float32 ``images`` (one onnxruntime call); ``names`` are
+        their files. A row whose label index lies outside the model's label names or whose
+        pose or distance is not finite comes back as its error message instead."""
+        index, pose, distance = self.session.run(None, {self.input_name: images})
+        labels = self.info.label_names
+        out: list[Prediction | str] = []
+        for j, name in enumerate(names):
+            i, p, d = int(index[j]), float(pose[j]), float(distance[j])
+            if not 0 <= i < len(labels):
+                out.append(
+                    f"image {name}: the model gave label index {i}, outside its {len(labels)} label names "
+                    "(damaged model)"
+                )
+            elif not (math.isfinite(p) and math.isfinite(d)):
+                out.append(
+                    f"image {name}: the model gave a non-finite pose {p} or distance {d} (damaged model)"
+                )
+            else:
+                out.append(Prediction(name, labels[i], p, d))
+        return out
+
     def predict(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction]:
-        """Recognizes (B, C, H, W) float32 ``images``; ``names`` are their file names."""
+        """Recognizes (B, C, H, W) float32 ``images`` in batches; ``names`` are their file names.
+
+        Raises:
+            ValueError: a row is damaged (see :meth:`predict_rows`).
+        """
         out: list[Prediction] = []
         for i in range(0, len(images), _BATCH):
-            index, pose, distance = self.session.run(None, {self.input_name: images[i : i + _BATCH]})
-            for j in range(len(index)):
-                out.append(
-                    Prediction(
-                        names[i + j],
-                        self.info.label_names[int(index[j])],
-                        float(pose[j]),
-                        float(distance[j]),
-                    )
-                )
+            for row in self.predict_rows(images[i : i + _BATCH], names[i : i + _BATCH]):
+                if isinstance(row, str):
+                    raise ValueError(row)
+                out.append(row)
         return out
+
+
+def read_info(path: str) -> OnnxModelInfo:
+    """The metadata of an ONNX file, read with onnx (the graph, not external weights)."""
+    onnx = require("onnx", "onnx", "eigview predict")
+
+    try:
+        model = onnx.load(path, load_external_data=False)
+    except Exception as exc:  # protobuf DecodeError and others
+        onnxruntime = require("onnxruntime", "onnx", "eigview predict")
+
+        try:  # onnxruntime's parser words it best; it refuses what onnx cannot parse
+            onnxruntime.InferenceSession(path, providers=["CPUExecutionProvider"])
+        except Exception as ort_exc:
+            raise ValueError(f"ONNX model {path!r} could not be loaded by onnxruntime: {ort_exc}") from exc
+        raise ValueError(f"ONNX model {path!r} could not be loaded by onnx: {exc}") from exc
+    props = {p.key: p.value for p in model.metadata_props}
+    return OnnxModelInfo.from_props(props, source=f"ONNX model {path!r}")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -122,8 +180,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--debug-modules", action="store_true", help=argparse.SUPPRESS)
 
 
+def _batches(model: OnnxRecognizer, paths: Sequence[str]) -> Iterator[tuple[np.ndarray, list[str], int]]:
+    """Images decoded ``_BATCH`` at a time (memory flat in the number of files): each batch
+    as (B, C, H, W) float32, its file names and how many files failed (reported on stderr)."""
+    for start in range(0, len(paths), _BATCH):
+        good, names, failed = [], [], 0
+        for path in paths[start : start + _BATCH]:
+            try:
+                good.append(model.load(path))
+                names.append(path)
+            except ValueError as exc:
+                print(f"eigview predict: error: {escape(str(exc))}", file=sys.stderr)
+                failed += 1
+        yield (np.stack(good) if good else np.empty((0, *model.info.image_shape), np.float32)), names, failed
+
+
 def run(args: argparse.Namespace) -> int:
     """Runs ``eigview predict`` on parsed arguments; returns the exit status.
+
+    Images are read, recognized and printed one batch at a time. Names from files (label
+    names, image paths) are printed escaped (:func:`escape`).
 
     Raises:
         ValueError: the model cannot be used (the caller reports it, exit status 2).
@@ -132,19 +208,20 @@ def run(args: argparse.Namespace) -> int:
         inputs = [("--onnx", args.onnx), *(("IMAGE", path) for path in args.images)]
         check_output_path(args.json, "--json", inputs=inputs)
     model = OnnxRecognizer(args.onnx)
-    good: list[np.ndarray] = []
-    names: list[str] = []
+    predictions: list[Prediction] = []
     n_failed = 0
-    for path in args.images:
-        try:
-            good.append(model.load(path))
-            names.append(path)
-        except ValueError as exc:
-            print(f"eigview predict: error: {exc}", file=sys.stderr)
-            n_failed += 1
-    predictions = model.predict(np.stack(good), names) if good else []
-    for p in predictions:
-        print(f"{p.image}\tlabel {p.label}\tpose {p.pose:g}\tdistance {p.distance:.6g}")
+    for images, names, failed in _batches(model, args.images):
+        n_failed += failed
+        for row in model.predict_rows(images, names) if names else []:
+            if isinstance(row, str):
+                print(f"eigview predict: error: {escape(row)}", file=sys.stderr)
+                n_failed += 1
+                continue
+            if args.json:  # held for the file only: memory stays flat without it
+                predictions.append(row)
+            print(
+                f"{escape(row.image)}\tlabel {escape(row.label)}\tpose {row.pose:g}\tdistance {row.distance:.6g}"
+            )
     if args.json:
         write_json(args.json, [p.to_json() for p in predictions])
     if n_failed:

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from torch_eigview.check import as_angle_tensor, check_choice
-from torch_eigview.io.images import read_image, to_unit_float
+from torch_eigview.check import as_angle_tensor, check_choice, check_limit
+from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
 
 __all__ = ["DATA_ENV", "CoilFolder", "default_data_root", "find_coil_root", "parse_object_spec"]
 
@@ -86,6 +86,10 @@ def find_coil_root(root: str | os.PathLike[str] | None = None, name: str = "coil
     )
 
 
+# Object ids one selection may name (COIL-100 has 100).
+OBJECT_LIMIT = ("EIGVIEW_MAX_OBJECTS", 100_000)
+
+
 def parse_object_spec(spec: str) -> list[int]:
     """Parses an object selection such as ``"1-20"``, ``"1,3,5-7"`` or ``"4"``.
 
@@ -97,7 +101,8 @@ def parse_object_spec(spec: str) -> list[int]:
 
     Raises:
         TypeError: ``spec`` is not a string.
-        ValueError: ``spec`` is empty, malformed, holds 0 or a reversed range.
+        ValueError: ``spec`` is empty, malformed, holds 0 or a reversed range, or names more
+            ids than ``EIGVIEW_MAX_OBJECTS`` (default 100,000).
     """
     if not isinstance(spec, str):
         raise TypeError(f"spec must be a string such as '1-20' or '1,3,5-7', got {type(spec).__name__}")
@@ -112,8 +117,57 @@ def parse_object_spec(spec: str) -> list[int]:
             raise ValueError(f"spec={spec!r} must hold positive object ids, got {lo}")
         if hi < lo:
             raise ValueError(f"spec={spec!r} holds the reversed range {lo}-{hi} (must be low-high)")
+        # Bounded before the set is built: "1-99999999999" would fill the memory.
+        check_limit(len(ids) + hi - lo + 1, f"spec={spec!r}", "object ids", *OBJECT_LIMIT)
         ids.update(range(lo, hi + 1))
     return sorted(ids)
+
+
+def _scan(root: Path) -> list[tuple[int, int, Path]]:
+    """``(object, pose, path)`` of the COIL-named files of ``root``.
+
+    Every name that matches is checked with ``os.stat`` (never opened): a FIFO, a device, a
+    folder or a symlink loop named like an image is an error that names them all, not a file
+    silently left out of the data set.
+    """
+    found, bad = [], []
+    for p in root.iterdir():
+        m = _FILE_RE.fullmatch(p.name)
+        if m is None:
+            continue
+        try:
+            check_regular_file(p, "COIL file")
+        except ValueError as exc:
+            bad.append(str(exc))
+            continue
+        found.append((int(m.group(1)), int(m.group(2)), p))
+    if bad:
+        listed = "; ".join(sorted(bad)[:5]) + (f"; ... ({len(bad)} in all)" if len(bad) > 5 else "")
+        raise ValueError(f"root={str(root)!r} holds COIL-named entries that are not image files: {listed}")
+    return found
+
+
+def _pose_unit(found: list[tuple[int, int, Path]]) -> str:
+    """``pose_unit="auto"``: each object's own poses say "degrees" (some P >= 72) or "index"
+    (all P < 72); objects that disagree are an error naming the files, so that one stray
+    ``obj1__72.png`` cannot turn a COIL-20 folder's indices into degrees."""
+    highest: dict[int, int] = {}
+    for obj, pose, _ in found:
+        highest[obj] = max(highest.get(obj, 0), pose)
+    degree_objects = {obj for obj, top in highest.items() if top >= _N_INDEX_POSES}
+    if not degree_objects:
+        return "index"
+    if len(degree_objects) == len(highest):
+        return "degrees"
+    strays = sorted(p.name for obj, pose, p in found if pose >= _N_INDEX_POSES)
+    listed = ", ".join(strays[:5]) + (f", ... ({len(strays)} files)" if len(strays) > 5 else "")
+    index_objects = sorted(set(highest) - degree_objects)
+    raise ValueError(
+        f"the folder mixes pose conventions: objects {sorted(degree_objects)[:10]} have poses P >= "
+        f"{_N_INDEX_POSES} (degrees, COIL-100) in {listed}, while objects {index_objects[:10]} have only "
+        f"P < {_N_INDEX_POSES} (indices, COIL-20); remove the stray files or pass pose_unit='index' or "
+        "'degrees' (eigview coil --pose-unit)"
+    )
 
 
 class CoilFolder:
@@ -127,17 +181,19 @@ class CoilFolder:
     Args:
         root: The folder; other files in it are ignored.
         pose_unit: ``"index"`` (COIL-20, pose ``P`` is ``5·P`` degrees), ``"degrees"``
-            (COIL-100, pose ``P`` is ``P`` degrees) or ``"auto"``: ``"degrees"`` when some
-            ``P`` exceeds 71, the largest COIL-20 index, else ``"index"``. A COIL-100 subset
+            (COIL-100, pose ``P`` is ``P`` degrees) or ``"auto"``: ``"degrees"`` when every
+            object has some ``P`` above 71, the largest COIL-20 index, ``"index"`` when none
+            has, and an error when the objects disagree (a stray file). A COIL-100 subset
             whose poses all lie below 72 degrees is thus read as indices; pass the unit then.
         dtype: Floating dtype of the returned tensors.
 
     Raises:
         TypeError: ``root`` is not a path, ``pose_unit`` not a str or ``dtype`` not a
             floating dtype.
-        ValueError: ``root`` is not a folder or holds no COIL file, ``pose_unit`` is
-            unknown, a pose lies outside ``[0, 360)`` degrees, two files name the same view,
-            or the first image cannot be read.
+        ValueError: ``root`` is not a folder or holds no COIL file, a COIL-named entry is
+            not a regular file (FIFO, device, folder, symlink loop), ``pose_unit`` is
+            unknown or "auto" finds mixed conventions, a pose lies outside ``[0, 360)``
+            degrees, two files name the same view, or the first image cannot be read.
     """
 
     def __init__(
@@ -151,16 +207,11 @@ class CoilFolder:
         self.root = Path(root)
         if not self.root.is_dir():
             raise ValueError(f"root={str(self.root)!r} must be an existing directory")
-        found = [
-            (int(m.group(1)), int(m.group(2)), p)
-            for p in self.root.iterdir()
-            if (m := _FILE_RE.fullmatch(p.name)) is not None and p.is_file()
-        ]
+        found = _scan(self.root)
         if not found:
             raise ValueError(f"root={str(self.root)!r} holds no COIL files (obj{{O}}__{{P}}.png)")
-        if pose_unit == "auto":
-            pose_unit = "degrees" if any(p >= _N_INDEX_POSES for _, p, _ in found) else "index"
-        self.pose_unit = pose_unit
+        self.pose_unit = _pose_unit(found) if pose_unit == "auto" else pose_unit
+        pose_unit = self.pose_unit
         self.dtype = dtype
         step, limit = (5.0, _N_INDEX_POSES) if pose_unit == "index" else (1.0, 360)
         self._files: dict[int, dict[float, Path]] = {}

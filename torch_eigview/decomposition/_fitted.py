@@ -12,7 +12,13 @@ from typing import ClassVar, Generic, Protocol, TypeVar
 
 import torch
 
-from torch_eigview.check import check_finite, check_float_tensor, check_n_components, check_ndim
+from torch_eigview.check import (
+    check_finite,
+    check_float_tensor,
+    check_magnitude,
+    check_n_components,
+    check_ndim,
+)
 from torch_eigview.decomposition.linalg import EigenFit
 from torch_eigview.errors import NotFittedError
 from torch_eigview.nn.projection import EigenProjection
@@ -30,7 +36,8 @@ def views_to_fit(X: object) -> tuple[torch.Tensor, tuple[int, int, int] | None]:
 
     Raises:
         TypeError: ``X`` is not a float32/float64 tensor.
-        ValueError: bad shape, P < 2 or non-finite values.
+        ValueError: bad shape, P < 2, N = 0, non-finite values, or values whose products
+            overflow or underflow the dtype.
     """
     x = check_float_tensor(X, "X")
     if x.dtype not in DTYPES:
@@ -38,13 +45,15 @@ def views_to_fit(X: object) -> tuple[torch.Tensor, tuple[int, int, int] | None]:
     check_ndim(x, "X", (2, 4), "(P, N) or (P, C, H, W)")
     if x.shape[0] < 2:
         raise ValueError(f"X must hold at least 2 views (rows), got P={x.shape[0]}")
-    # NaN/inf anywhere makes the sum non-finite; a finite sum proves every value finite
-    # and is ~10x cheaper than an elementwise mask (0.2 s on the 820 x 16,384 COIL data).
-    # A non-finite sum may also be an overflow of finite values: the exact check decides.
-    if x.numel() and not bool(torch.isfinite(x.sum())):
-        check_finite(x, "X")
+    if math.prod(x.shape[1:]) == 0:
+        raise ValueError(f"X must hold at least one value per view (N >= 1), got shape {tuple(x.shape)}")
+    flat = x.detach().reshape(x.shape[0], -1)
+    # One min/max reduction (about as cheap as a sum, ~10x cheaper than an elementwise mask)
+    # proves every value finite and the Gram products within the dtype's range, so an
+    # overflow or underflow is named as such, not as "all views are identical".
+    check_magnitude(flat, "X", max(flat.shape))
     image_shape = (x.shape[1], x.shape[2], x.shape[3]) if x.ndim == 4 else None
-    return x.detach().reshape(x.shape[0], -1), image_shape
+    return flat, image_shape
 
 
 class FitRecord(Protocol):
@@ -116,7 +125,8 @@ class FittedEstimator(Generic[FitT]):
 
     @staticmethod
     def _check_fitted_views(X: object, fit: FitRecord) -> torch.Tensor:
-        """Checks views to project: (P, N) or (P, C, H, W) of the fitted N and dtype."""
+        """Checks views to project, (P, N) or (P, C, H, W) of the fitted N and dtype, finite;
+        returns them as (P, N) (P may be 0)."""
         x = check_float_tensor(X, "X")
         check_ndim(x, "X", (2, 4), "(P, N) or (P, C, H, W)")
         if math.prod(x.shape[1:]) != fit.n_features:
@@ -126,7 +136,10 @@ class FittedEstimator(Generic[FitT]):
             raise ValueError(f"X must have shape {expected} as fitted, got shape {tuple(x.shape)}")
         if x.dtype != fit.dtype:
             raise TypeError(f"X must have the fitted dtype {fit.dtype}, got {x.dtype}")
-        return x
+        # A finite sum proves every value finite; the exact check names what is not.
+        if x.numel() and not bool(torch.isfinite(x.sum())):
+            check_finite(x, "X")
+        return x.detach().reshape(x.shape[0], fit.n_features)
 
 
 class FittedEigenspace(FittedEstimator[EigenFit]):
@@ -185,16 +198,15 @@ class FittedEigenspace(FittedEstimator[EigenFit]):
             X: (P, N) or (P, C, H, W) views with N = ``n_features_in_``, of the fitted dtype.
 
         Returns:
-            (P, k) coordinates ``(X - mean_) @ components_.T``.
+            (P, k) coordinates ``(X - mean_) @ components_.T``; (0, k) for P = 0.
 
         Raises:
             NotFittedError: before ``fit``.
             TypeError: ``X`` is not a float tensor of the fitted dtype.
-            ValueError: ``X`` has the wrong number of features.
+            ValueError: ``X`` has the wrong number of features, or NaN or infinite values.
         """
         fit = self._fitted("transform")
-        x = self._check_fitted_views(X, fit)
-        return self._project(x.reshape(x.shape[0], -1), fit)
+        return self._project(self._check_fitted_views(X, fit), fit)
 
     def inverse_transform(self, Z: torch.Tensor) -> torch.Tensor:
         """Maps (P, k) coordinates back to (P, N) views ``Z @ components_ + mean_``.
@@ -213,6 +225,7 @@ class FittedEigenspace(FittedEstimator[EigenFit]):
             raise ValueError(f"Z must have shape (P, {k}), got shape {tuple(z.shape)}")
         if z.dtype != fit.dtype:
             raise TypeError(f"Z must have the fitted dtype {fit.dtype}, got {z.dtype}")
+        check_finite(z, "Z")
         return z @ fit.components + fit.mean
 
     def to_module(

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from torch_eigview.check import check_choice, check_finite, check_image_shape, check_int
+from torch_eigview.check import check_choice, check_finite, check_image_shape, check_int, check_magnitude
 from torch_eigview.decomposition._fitted import DTYPES, FittedEigenspace, views_to_fit
 from torch_eigview.decomposition.linalg import EigenFit, centred_k, gram, leading_eigenpairs
 
@@ -155,7 +155,9 @@ class Eigenspace(FittedEigenspace):
         block_size = check_int(block_size, "block_size", 1)
         shape = check_image_shape(image_shape, G.shape[0], "image_shape")
         with torch.no_grad():
-            self._fit_views(_views_from_sparse(G, C, block_size), shape, "G·C")
+            x = _views_from_sparse(G, C, block_size)
+            check_magnitude(x, "G·C", max(x.shape))
+            self._fit_views(x, shape, "G·C")
         return self
 
     def _fit_views(

@@ -180,7 +180,14 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
     # ------------------------------------------------------------------ kernels
     def _kernel(self, x: torch.Tensor, y: torch.Tensor, gamma: float, name: str) -> torch.Tensor:
         if isinstance(self.kernel, str):
-            return pairwise_kernel(x, y, self.kernel, gamma, self.degree, self.coef0)
+            out = pairwise_kernel(x, y, self.kernel, gamma, self.degree, self.coef0)
+            if out.numel() and not bool(torch.isfinite(out.sum())) and not bool(torch.isfinite(out).all()):
+                raise ValueError(
+                    f"the {self.kernel} kernel of {name} is not finite in {x.dtype} with gamma={gamma:g}, "
+                    f"degree={self.degree}, coef0={self.coef0:g}: the parameters overflow it (a smaller gamma "
+                    "or degree, or float64 views)"
+                )
+            return out
         out = self.kernel(x, y)
         if not isinstance(out, torch.Tensor) or tuple(out.shape) != (x.shape[0], y.shape[0]):
             got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
@@ -312,9 +319,7 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
 
     # ------------------------------------------------------------------ inference
     def _check_views(self, X: object, fit: _KernelFit) -> torch.Tensor:
-        x = self._check_fitted_views(X, fit)
-        check_finite(x, "X")
-        return x.detach().reshape(x.shape[0], -1)
+        return self._check_fitted_views(X, fit)
 
     def transform(self, X: torch.Tensor) -> torch.Tensor:
         """Projects views onto the kernel eigenspace.

@@ -31,12 +31,13 @@ is :mod:`torch_eigview.decomposition.linalg`'s, shared with ``Eigenspace``.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 
-from torch_eigview.check import check_finite, check_float_tensor, check_int, check_ndim
-from torch_eigview.decomposition._fitted import DTYPES, FittedEigenspace
+from torch_eigview.check import check_int
+from torch_eigview.decomposition._fitted import FittedEigenspace
+from torch_eigview.decomposition._stream import BlockSource, Stream, blocks_of, stream_mean
 from torch_eigview.decomposition.linalg import (
     EigenFit,
     gram,
@@ -48,90 +49,9 @@ from torch_eigview.decomposition.linalg import (
 
 __all__ = ["BlockSource", "StreamingEigenspace", "blocks_of"]
 
-BlockSource = Callable[[], Iterable[torch.Tensor]]
-"""A callable returning a fresh iterable of (P_b, N) or (P_b, C, H, W) view blocks."""
-
 _METHODS = ("exact", "randomized")
 _NAME = "the streamed views"  # the fitted views, as the errors name them
 CHUNK_VIEWS = 256  # views per cross-product GEMM of the exact Gram path
-
-
-def blocks_of(x: torch.Tensor, block_size: int) -> BlockSource:
-    """A re-generable source over the rows of an explicit (P, ...) tensor, ``block_size`` rows a block."""
-    block_size = check_int(block_size, "block_size", 1)
-    return lambda: (x[i : i + block_size] for i in range(0, x.shape[0], block_size))
-
-
-class _Stream:
-    """Validates the blocks of a source pass after pass: dtype, feature shape and P on every
-    pass. Finiteness is checked by the first pass, :func:`_mean`, on each block's column
-    sums (a NaN or infinity anywhere makes its column's sum non-finite); a later pass must
-    repeat the first, and the fits check what they accumulate (:meth:`check_result`)
-    rather than scan every block again, which costs a quarter of an exact fit's time."""
-
-    def __init__(self, source: object, name: str = "blocks") -> None:
-        if isinstance(source, torch.Tensor):
-            source = blocks_of(source, 256)
-        elif isinstance(source, Sequence) and not isinstance(source, str):
-            blocks = list(source)
-            source = lambda: iter(blocks)  # noqa: E731
-        if not callable(source):
-            raise TypeError(
-                f"{name} must be a callable returning an iterable of view blocks, a sequence of "
-                f"tensors or a tensor, got {type(source).__name__}"
-            )
-        self.source: Callable[[], Iterable[object]] = source
-        self.name = name
-        self.dtype: torch.dtype | None = None
-        self.device: torch.device | None = None
-        self.feature_shape: tuple[int, ...] | None = None
-        self.n_views: int | None = None
-        self.block_rows: list[int] = []
-        self.index = -1  # the source's index of the block last yielded
-
-    def __iter__(self) -> Iterator[torch.Tensor]:
-        rows: list[int] = []
-        for i, block in enumerate(self.source()):
-            what = f"{self.name}[{i}]"
-            b = check_float_tensor(block, what)
-            check_ndim(b, what, (2, 4), "(P_b, N) or (P_b, C, H, W)")
-            if b.dtype not in DTYPES:
-                raise TypeError(f"{what} must have dtype float32 or float64, got {b.dtype}")
-            if self.feature_shape is None:
-                self.feature_shape, self.dtype, self.device = tuple(b.shape[1:]), b.dtype, b.device
-            elif tuple(b.shape[1:]) != self.feature_shape:
-                raise ValueError(
-                    f"{what} must have shape (P_b, {', '.join(map(str, self.feature_shape))}) like the "
-                    f"first block, got shape {tuple(b.shape)}"
-                )
-            elif b.dtype != self.dtype:
-                raise TypeError(f"{what} must have the first block's dtype {self.dtype}, got {b.dtype}")
-            if b.shape[0] == 0:
-                continue
-            rows.append(b.shape[0])
-            self.index = i
-            yield b.detach().reshape(b.shape[0], -1).to(self.device)
-        if self.n_views is None:
-            self.n_views, self.block_rows = sum(rows), rows
-        elif rows != self.block_rows:
-            raise ValueError(
-                f"{self.name} is not re-generable: a later pass gave blocks of {rows[:8]}... rows, the "
-                f"first {self.block_rows[:8]}... (a source must yield the same views on every call)"
-            )
-
-    def check_result(self, x: torch.Tensor, what: str) -> None:
-        """Raises ValueError when a sum over later passes is not finite (the first pass was)."""
-        if not bool(torch.isfinite(x).all()):
-            raise ValueError(
-                f"{self.name} gave non-finite values on a later pass ({what} came out non-finite) although the "
-                "first pass was finite: either the source did not yield the same views on every call (it "
-                "must), or the sums overflowed the blocks' dtype (values too large: rescale the views)"
-            )
-
-    @property
-    def image_shape(self) -> tuple[int, int, int] | None:
-        s = self.feature_shape
-        return (s[0], s[1], s[2]) if s is not None and len(s) == 3 else None
 
 
 class StreamingEigenspace(FittedEigenspace):
@@ -175,7 +95,8 @@ class StreamingEigenspace(FittedEigenspace):
         self.max_views = check_int(max_views, "max_views", 1)
         self.oversample = check_int(oversample, "oversample", 0)
         self.n_iter = check_int(n_iter, "n_iter", 0)
-        self.seed = seed
+        # Validated here, not when the randomized method first draws Ω at the end of a pass.
+        self.seed = check_int(seed, "seed", -(2**63), 2**64 - 1)
         self.n_passes_ = 0
 
     def __repr__(self) -> str:
@@ -197,7 +118,7 @@ class StreamingEigenspace(FittedEigenspace):
             ValueError: blocks of different view shapes, non-finite values, P < 2, a source
                 that does not repeat itself, or ``n_components`` above the rank.
         """
-        self._fit_stream(_Stream(X))
+        self._fit_stream(Stream(X))
         return self
 
     def fit_transform(self, X: torch.Tensor | BlockSource | Sequence[torch.Tensor]) -> torch.Tensor:
@@ -215,7 +136,7 @@ class StreamingEigenspace(FittedEigenspace):
         Raises:
             TypeError, ValueError: as :meth:`fit`.
         """
-        stream = _Stream(X)
+        stream = Stream(X)
         fit = self._fit_stream(stream)
         with torch.no_grad():
             z = torch.cat([self._project(b, fit) for b in stream])
@@ -223,9 +144,9 @@ class StreamingEigenspace(FittedEigenspace):
         self.n_passes_ += 1
         return z
 
-    def _fit_stream(self, stream: _Stream) -> EigenFit:
+    def _fit_stream(self, stream: Stream) -> EigenFit:
         with torch.no_grad():
-            mean64 = _mean(stream)
+            mean64 = stream_mean(stream)
             assert stream.n_views is not None and stream.dtype is not None
             if stream.n_views < 2:
                 raise ValueError(f"blocks must hold at least 2 views in all, got P={stream.n_views}")
@@ -241,7 +162,7 @@ class StreamingEigenspace(FittedEigenspace):
     # ------------------------------------------------------------------ exact
     @staticmethod
     def _record(
-        stream: _Stream, mean64: torch.Tensor, comps: torch.Tensor, eigvals: torch.Tensor, total: torch.Tensor
+        stream: Stream, mean64: torch.Tensor, comps: torch.Tensor, eigvals: torch.Tensor, total: torch.Tensor
     ) -> EigenFit:
         """The fit from (k, N) components, their (k,) eigenvalues and the () trace."""
         assert stream.dtype is not None and stream.n_views is not None
@@ -250,13 +171,13 @@ class StreamingEigenspace(FittedEigenspace):
         )
 
     def _leading(
-        self, scatter: torch.Tensor, stream: _Stream, mean64: torch.Tensor
+        self, scatter: torch.Tensor, stream: Stream, mean64: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         assert stream.dtype is not None and stream.n_views is not None
         stream.check_result(scatter, "the scatter or Gram matrix")
         return leading_eigenpairs(scatter, self.n_components, mean64, stream.n_views, stream.dtype, _NAME)
 
-    def _exact_covariance(self, stream: _Stream, mean64: torch.Tensor) -> EigenFit:
+    def _exact_covariance(self, stream: Stream, mean64: torch.Tensor) -> EigenFit:
         mean = mean64.to(stream.dtype)
         n = mean.numel()
         scatter = torch.zeros(n, n, dtype=torch.float64, device=mean.device)
@@ -273,7 +194,7 @@ class StreamingEigenspace(FittedEigenspace):
         eigvals, basis, total = self._leading(scatter, stream, mean64)
         return self._record(stream, mean64, basis.T, eigvals, total)
 
-    def _exact_gram(self, stream: _Stream, mean64: torch.Tensor) -> EigenFit:
+    def _exact_gram(self, stream: Stream, mean64: torch.Tensor) -> EigenFit:
         assert stream.n_views is not None
         mean = mean64.to(stream.dtype)
         p = stream.n_views
@@ -314,7 +235,7 @@ class StreamingEigenspace(FittedEigenspace):
         return self._record(stream, mean64, comp / eigvals.sqrt()[:, None], eigvals, total)
 
     # ------------------------------------------------------------------ randomized
-    def _randomized(self, stream: _Stream, mean64: torch.Tensor) -> EigenFit:
+    def _randomized(self, stream: Stream, mean64: torch.Tensor) -> EigenFit:
         assert stream.n_views is not None and stream.dtype is not None
         p, n = stream.n_views, mean64.numel()
         omega = sketch_matrix(self.n_components, self.oversample, p, n, self.seed, mean64.device)
@@ -374,24 +295,3 @@ def _cross(gram: torch.Tensor, panel: torch.Tensor, lo: int, start: int, chunk: 
     cross = (panel @ chunk.T).double()
     gram[lo : lo + panel.shape[0], start : start + chunk.shape[0]] = cross
     gram[start : start + chunk.shape[0], lo : lo + panel.shape[0]] = cross.T
-
-
-def _mean(stream: _Stream) -> torch.Tensor:
-    """Pass 1: the (N,) mean view, summed in float64, and the blocks' finiteness.
-
-    A block's float64 column sums are finite exactly when its values are (float32 views
-    cannot overflow them), so the sums, (N,) per block, are checked instead of every value.
-    """
-    total: torch.Tensor | None = None
-    count = 0
-    for b in stream:
-        part = torch.sum(b, dim=0, dtype=torch.float64)
-        if not bool(torch.isfinite(part).all()):
-            what = f"{stream.name}[{stream.index}]"
-            check_finite(b, what)  # names the NaN or infinite values
-            raise ValueError(f"{what} is too large: its float64 column sums overflow (rescale the views)")
-        total = part if total is None else total + part
-        count += b.shape[0]
-    if total is None:
-        raise ValueError("blocks must hold at least 2 views in all, got P=0")
-    return total / count

@@ -23,10 +23,15 @@ import torch
 from skimage.registration import optical_flow_ilk, optical_flow_tvl1
 from torch.utils.data._utils.collate import default_collate_fn_map
 
-from torch_eigview.check import check_finite, check_float_tensor, check_ndim
+from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
 
-__all__ = ["Correspondence", "correspondence_from_disparity", "estimate_correspondence"]
+__all__ = [
+    "Correspondence",
+    "check_correspondence",
+    "correspondence_from_disparity",
+    "estimate_correspondence",
+]
 
 _METHODS = ("tvl1", "ilk")
 
@@ -223,6 +228,37 @@ def _consistency(d_ab: torch.Tensor, d_ba: torch.Tensor, threshold: float) -> to
     return inside & (round_trip.abs() <= threshold)
 
 
+def check_correspondence(correspondence: object, name: str = "correspondence") -> Correspondence:
+    """Checks that ``correspondence`` is a :class:`Correspondence` whose tensors agree in shape.
+
+    Raises:
+        TypeError: not a :class:`Correspondence` (e.g. None).
+        ValueError: a mask or vertical flow whose shape is not the disparities' (B, H, W).
+    """
+    if not isinstance(correspondence, Correspondence):
+        raise TypeError(
+            f"{name} must be a Correspondence (from estimate_correspondence or correspondence_from_disparity), "
+            f"got {type(correspondence).__name__}"
+        )
+    shape = tuple(correspondence.disparity_12.shape)
+    for field in dataclasses.fields(correspondence):
+        value = getattr(correspondence, field.name)
+        if value is not None and tuple(value.shape) != shape:
+            raise ValueError(
+                f"{name}.{field.name} must have the shape of disparity_12 {shape}, got {tuple(value.shape)}"
+            )
+    return correspondence
+
+
+def _check_mask(mask: object, name: str, shape: torch.Size) -> torch.Tensor:
+    """A validity mask of ``shape`` (or (H, W) for a single pair) as bool."""
+    if not isinstance(mask, torch.Tensor):
+        raise TypeError(f"{name} must be a bool tensor of shape {tuple(shape)}, got {type(mask).__name__}")
+    if tuple(mask.shape) not in (tuple(shape), tuple(shape[1:])):
+        raise ValueError(f"{name} must have shape {tuple(shape)}, got {tuple(mask.shape)}")
+    return mask.reshape(shape).bool()
+
+
 def correspondence_from_disparity(
     disparity_12: torch.Tensor,
     disparity_21: torch.Tensor | None = None,
@@ -239,7 +275,11 @@ def correspondence_from_disparity(
             ``disparity_12`` row by row (valid where the inverse is single-valued).
         valid_12, valid_21: optional masks; by default the forward–backward check with
             ``threshold`` pixels decides.
-        threshold: forward–backward tolerance in pixels.
+        threshold: forward–backward tolerance in pixels, a finite number > 0.
+
+    Raises:
+        TypeError: a disparity or mask is not a tensor (the disparities float).
+        ValueError: shapes that differ, non-finite disparities, or a bad ``threshold``.
     """
     d12 = check_float_tensor(disparity_12, "disparity_12")
     check_ndim(d12, "disparity_12", (2, 3), "(H, W) or (B, H, W)")
@@ -256,8 +296,17 @@ def correspondence_from_disparity(
                 f"disparity_21 must have the shape of disparity_12 {tuple(d12.shape)}, got {tuple(d21.shape)}"
             )
         check_finite(d21, "disparity_21")
-    v12 = _consistency(d12, d21, threshold) if valid_12 is None else valid_12.reshape(d12.shape).bool()
-    v21 = _consistency(d21, d12, threshold) if valid_21 is None else valid_21.reshape(d12.shape).bool()
+    threshold = check_positive(threshold, "threshold")
+    v12 = (
+        _consistency(d12, d21, threshold)
+        if valid_12 is None
+        else _check_mask(valid_12, "valid_12", d12.shape)
+    )
+    v21 = (
+        _consistency(d21, d12, threshold)
+        if valid_21 is None
+        else _check_mask(valid_21, "valid_21", d12.shape)
+    )
     return Correspondence(d12, d21, v12, v21)
 
 
@@ -300,7 +349,14 @@ def estimate_correspondence(
         **flow_kwargs: passed to the scikit-image flow function.
 
     Returns:
-        A :class:`Correspondence` of shape (B, H, W) on the device and dtype of ``view1``.
+        A :class:`Correspondence` of shape (B, H, W) on the device and dtype of ``view1``;
+        B = 0 gives an empty one.
+
+    Raises:
+        TypeError: a view is not a float tensor, or ``method`` not a str.
+        ValueError: shapes that differ or are smaller than 2x2 pixels, non-finite views,
+            an unknown ``method``, a ``threshold`` that is not a finite number > 0, or a
+            flow that diverges (views far outside image intensities).
     """
     v1 = check_float_tensor(view1, "view1")
     v2 = check_float_tensor(view2, "view2")
@@ -309,24 +365,45 @@ def estimate_correspondence(
         raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    threshold = check_positive(threshold, "threshold")
+    if v1.shape[-3] < 1:
+        raise ValueError(f"view1 must have at least one channel, got shape {tuple(v1.shape)}")
+    if v1.shape[-2] < 2 or v1.shape[-1] < 2:
+        raise ValueError(
+            f"view1 must be at least 2x2 pixels (the flow takes image gradients), got H={v1.shape[-2]}, "
+            f"W={v1.shape[-1]}"
+        )
     check_finite(v1, "view1")
     check_finite(v2, "view2")
     if v1.ndim == 3:
         v1, v2 = v1[None], v2[None]
+    if v1.shape[0] == 0:  # an empty batch of pairs has an empty correspondence
+        empty = v1.new_zeros(0, *v1.shape[-2:])
+        mask = torch.zeros(empty.shape, dtype=torch.bool, device=v1.device)
+        return Correspondence(empty, empty.clone(), mask, mask.clone(), empty.clone(), empty.clone())
     flow = optical_flow_tvl1 if method == "tvl1" else optical_flow_ilk
     d12, d21, v12, v21 = [], [], [], []
-    for a, b in zip(v1, v2, strict=True):
-        ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
-        # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
-        fwd = flow(ga, gb, **flow_kwargs)
-        d12.append(fwd[1])
-        v12.append(fwd[0])
-        bwd = flow(gb, ga, **flow_kwargs)
-        d21.append(bwd[1])
-        v21.append(bwd[0])
+    # A diverging flow is reported below with its cause, not as numpy's RuntimeWarnings.
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for a, b in zip(v1, v2, strict=True):
+            ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
+            # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
+            fwd = flow(ga, gb, **flow_kwargs)
+            d12.append(fwd[1])
+            v12.append(fwd[0])
+            bwd = flow(gb, ga, **flow_kwargs)
+            d21.append(bwd[1])
+            v21.append(bwd[0])
 
     def tensor(arrays: list[np.ndarray]) -> torch.Tensor:
         return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)
+
+    if not all(np.isfinite(f).all() for f in (*d12, *d21, *v12, *v21)):
+        largest = max(float(v1.abs().max()), float(v2.abs().max()))
+        raise ValueError(
+            f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
+            f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
+        )
 
     corr = correspondence_from_disparity(tensor(d12), tensor(d21), threshold=threshold)
     return dataclasses.replace(corr, vertical_12=tensor(v12), vertical_21=tensor(v21))

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.check import as_angle_tensor, check_alpha
-from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.check import as_angle_tensor, check_alpha, check_number
+from torch_eigview.geometry.correspondence import Correspondence, check_correspondence
 
 __all__ = [
     "AffineCoefficients",
@@ -238,9 +238,26 @@ def estimate_elevation(
         mask: optional (B, H, W) bool, pixels to use (e.g. the object's foreground).
 
     Returns:
-        (B,) elevations in degrees.
+        (B,) elevations in degrees. A fit outside the model's range saturates at ±90
+        (``sin(elevation)`` clamped to [-1, 1]), which is not a camera any warp accepts:
+        :func:`~torch_eigview.synthesis.pair_geometry` treats it as no estimate.
+
+    Raises:
+        TypeError: ``correspondence`` is not a :class:`Correspondence`.
+        ValueError: no ``vertical_12``, a bad ``alpha``, ``center`` or ``mask``, or no
+            trusted pixel with depth under the mask.
     """
+    correspondence = check_correspondence(correspondence)
     alpha = check_alpha(alpha)
+    if center is not None and not math.isfinite(check_number(center, "center")):
+        raise ValueError(f"center={center!r} must be finite or None")
+    if mask is not None and (
+        not isinstance(mask, torch.Tensor) or mask.shape != correspondence.disparity_12.shape
+    ):
+        got = tuple(mask.shape) if isinstance(mask, torch.Tensor) else type(mask).__name__
+        raise ValueError(
+            f"mask must be a tensor of shape {tuple(correspondence.disparity_12.shape)}, got {got}"
+        )
     if correspondence.vertical_12 is None:
         raise ValueError("correspondence.vertical_12 is None: estimating the elevation needs a 2D flow")
     d12 = correspondence.disparity_12.double()

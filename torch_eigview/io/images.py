@@ -3,29 +3,91 @@
 Shared by :class:`~torch_eigview.datasets.coil.CoilFolder` and the torch-free ``eigview predict``
 (onnxruntime), so both see exactly the same pixels: grayscale gives ``C = 1``, RGB ``C = 3``,
 an alpha channel is dropped; ``uint8`` is divided by 255, ``uint16`` by 65535, float images
-are kept as they are.
+are kept as they are and must lie in ``[0, 1]``. Special files (FIFOs, devices, folders) are
+refused before they are opened, and a file of several pages is refused.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 
 import numpy as np
 import skimage.io
 
-__all__ = ["read_image", "to_unit_float"]
+__all__ = ["check_regular_file", "read_image", "to_unit_float"]
+
+_TIFF_SUFFIXES = (".tif", ".tiff")
+
+
+def check_regular_file(path: str | os.PathLike[str], what: str = "image") -> os.stat_result:
+    """Checks with ``os.stat``, before anything opens it, that ``path`` is a regular file.
+
+    A FIFO would block the reader forever, a device could stream without end, and a
+    directory or a symlink loop cannot be an image: each is refused, never opened.
+
+    Returns:
+        The file's ``os.stat`` result.
+
+    Raises:
+        ValueError: ``path`` is missing, unreadable, a symlink loop, or not a regular file;
+            the message names it and what it is.
+    """
+    try:
+        info = os.stat(path)  # follows symlinks; a loop raises ELOOP
+    except FileNotFoundError:
+        raise ValueError(f"{what} {os.fspath(path)!s} does not exist") from None
+    except OSError as exc:
+        raise ValueError(f"{what} {os.fspath(path)!s} cannot be used: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        kind = (
+            "a directory"
+            if stat.S_ISDIR(info.st_mode)
+            else "a FIFO (named pipe)"
+            if stat.S_ISFIFO(info.st_mode)
+            else "a device"
+            if stat.S_ISCHR(info.st_mode) or stat.S_ISBLK(info.st_mode)
+            else "a socket or other special file"
+        )
+        raise ValueError(f"{what} {os.fspath(path)!s} is {kind}, not a regular file: refused, never opened")
+    return info
+
+
+def _n_frames(path: str | os.PathLike[str]) -> int:
+    """Pages of a TIFF or frames of an animated image, read from the headers only."""
+    if os.fspath(path).lower().endswith(_TIFF_SUFFIXES):
+        import tifffile
+
+        with tifffile.TiffFile(path) as tif:
+            return len(tif.pages)
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return int(getattr(im, "n_frames", 1))
+    except Exception:  # not a format PIL knows: the decoder below reports it
+        return 1
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """Reads one file as a checked ``(C, H, W)`` array of its own dtype (alpha dropped).
 
+    The path is checked to be a regular file before it is opened
+    (:func:`check_regular_file`); a multi-page TIFF or an animated image is refused rather
+    than read as its first page, and float pixels must lie in ``[0, 1]``.
+
     Raises:
-        ValueError: the file cannot be decoded, or its layout or dtype is not an image's.
+        ValueError: a special file, a file that cannot be decoded, several pages, a layout
+            or dtype that is not an image's, or float pixels outside ``[0, 1]``.
     """
+    check_regular_file(path)
     try:
+        frames = _n_frames(path)
         arr = np.asarray(skimage.io.imread(path))
     except Exception as exc:  # imageio/PIL raise OSError, SyntaxError, ... for bad files
         raise ValueError(f"cannot read image {path}: {exc}") from exc
+    if frames > 1:
+        raise ValueError(f"image {path} holds {frames} pages or frames; one image per file is expected")
     if arr.ndim == 2:
         arr = arr[None]
     elif arr.ndim == 3 and arr.shape[-1] in (1, 2, 3, 4):
@@ -36,8 +98,17 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         raise ValueError(f"image {path} must be (H, W) or (H, W, 1..4), got shape {arr.shape}")
     if arr.dtype.kind not in "buf":
         raise ValueError(f"image {path} must hold unsigned or float pixels, got dtype {arr.dtype}")
-    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-        raise ValueError(f"image {path} must be finite, got NaN or infinite pixels")
+    if arr.dtype.kind == "f":
+        if not np.isfinite(arr).all():
+            raise ValueError(f"image {path} must be finite, got NaN or infinite pixels")
+        lo, hi = (float(arr.min()), float(arr.max())) if arr.size else (0.0, 0.0)
+        if lo < 0.0 or hi > 1.0:
+            # Intensities are in [0, 1]; a float image outside it is not one (rescaling it
+            # would hide the error, e.g. a 1e32-valued TIFF read as black).
+            raise ValueError(
+                f"image {path} has float values outside [0, 1] (min {lo:.6g}, max {hi:.6g}); "
+                "float images must hold intensities in [0, 1]"
+            )
     return arr
 
 

@@ -316,6 +316,9 @@ def compare_with_eager(
         ``|z|² − 2 z·g + |g|²`` (as in eager), which cancels near zero: in float32 a true
         distance of 0 reads up to about ``sqrt(1e-7 · |z|²)``, some 1e-4 for unit-norm views.
     """
+    if not isinstance(images, torch.Tensor) or images.ndim != 4 or images.shape[0] == 0:
+        shape = tuple(images.shape) if isinstance(images, torch.Tensor) else type(images).__name__
+        raise ValueError(f"images must be a (B, C, H, W) tensor with B >= 1 to compare, got {shape}")
     if session is None:
         onnxruntime = require("onnxruntime", "onnx", "compare_with_eager")
         verify_checksum(path)

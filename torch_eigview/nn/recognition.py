@@ -10,6 +10,7 @@ its nearest view, and the pose is interpolated along the closer one.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import torch
@@ -105,6 +106,14 @@ class NearestNeighborRecognizer(nn.Module):
             raise ValueError(f"poses must have shape ({g},), got {tuple(poses.shape)}")
         check_finite(poses.to(torch.float64), "poses")
         n_distinct = int(labels.unique().numel())
+        if label_names is not None and (
+            isinstance(label_names, (str, bytes, Mapping)) or not isinstance(label_names, Sequence)
+        ):
+            # A str would be split into characters and a dict into its keys, silently.
+            raise TypeError(
+                f"label_names must be None or a list of names, one per distinct label, got "
+                f"{type(label_names).__name__} {label_names!r:.80}"
+            )
         if label_names is not None and len(label_names) != n_distinct:
             raise ValueError(
                 f"label_names must name the {n_distinct} distinct labels, got {len(label_names)} names"
@@ -146,6 +155,10 @@ class NearestNeighborRecognizer(nn.Module):
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Recognizes a batch of views.
 
+        Export-friendly by contract: no data-dependent check runs here (no ``.item()``, no
+        branch on values), so NaN or infinite views give NaN distances rather than an
+        error. Callers with untrusted data use :meth:`predict`, which checks.
+
         Args:
             x: (B, C, H, W) or (B, N) views (the projection's dtype and size).
 
@@ -168,19 +181,49 @@ class NearestNeighborRecognizer(nn.Module):
         return self.labels[index], self.poses[index], best.clamp_min(0).sqrt(), index, z
 
     def predict(self, x: torch.Tensor, *, interpolate_pose: bool = False) -> Recognition:
-        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices.
+        """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices,
+        with the checks ``forward`` leaves out: finite views, and for a unit-norm projection
+        views whose L2 norm does not overflow the dtype (they would project to zeros).
 
         Args:
-            x: (B, C, H, W) or (B, N) views.
+            x: (B, C, H, W) or (B, N) views (the projection's dtype and size); B may be 0.
             interpolate_pose: refine each pose between the nearest gallery view and its
                 neighbours in pose order (:meth:`interpolate_poses`); else the nearest
                 view's pose, as ``forward`` (and the ONNX graph) give it.
+
+        Raises:
+            TypeError: ``x`` is not a float tensor (or not of the layer's dtype), or
+                ``interpolate_pose`` is not a bool.
+            ValueError: a bad shape, NaN or infinite values, norms that overflow, or
+                non-finite distances (a damaged gallery).
         """
         if not isinstance(interpolate_pose, bool):
             raise TypeError(f"interpolate_pose must be a bool, got {type(interpolate_pose).__name__}")
+        check_float_tensor(x, "x")
+        check_ndim(x, "x", (2, 4), "(B, N) or (B, C, H, W)")
+        if x.numel() and not bool(torch.isfinite(x.sum())):
+            check_finite(x, "x")  # names the NaN or infinite values; else only the sum overflowed
+        if getattr(self.projection, "unit_norm", False) and x.numel():
+            norms = torch.linalg.vector_norm(x.flatten(1), dim=1)
+            if not bool(torch.isfinite(norms).all()):
+                raise ValueError(
+                    f"x has views whose L2 norm overflows {x.dtype} (largest magnitude "
+                    f"{float(x.abs().max()):.3g}): a unit-norm projection would give zeros; rescale the views"
+                )
+        # A non-finite gallery point would win every search at distance 0 (-inf clamped):
+        # (G, k) values, checked per call, cheap next to the projection.
+        if not (bool(torch.isfinite(self.codes).all()) and bool(torch.isfinite(self.codes_sqnorm).all())):
+            raise ValueError("the recognizer's gallery codes are not finite: the recognizer is damaged")
         with torch.no_grad():
             labels, poses, distances, index, z = self._search_codes(x)
-            if interpolate_pose:
+        if not bool(torch.isfinite(distances).all()):
+            raise ValueError(
+                "the recognizer gave non-finite distances for finite views: the views' values (largest "
+                f"magnitude {float(x.abs().max()):.3g}) overflow {x.dtype} in the projection, or the gallery "
+                "or projection is damaged"
+            )
+        if interpolate_pose:
+            with torch.no_grad():
                 poses = self.interpolate_poses(z, index)
         return Recognition(labels, poses, distances, index)
 

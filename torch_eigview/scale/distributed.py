@@ -85,13 +85,15 @@ def _collective(rank: int, what: str, fn: Callable[..., object], *args: object, 
 
 
 def _shard_layout(
-    views: object, rank: int, group: dist.ProcessGroup | None
+    views: object, rank: int, group: dist.ProcessGroup | None, params: dict[str, object]
 ) -> tuple[list[int], tuple[int, ...]]:
-    """Every rank's view count and the common view shape, from one ``all_gather_object``.
+    """Every rank's view count and the common view shape, from one ``all_gather_object``
+    that also carries each rank's fit ``params`` (they must be rank 0's).
 
     Raises:
         ValueError: on every rank alike, when any rank's views are bad or differ in view
-            shape or dtype from rank 0's, or P < 2 over all ranks.
+            shape or dtype from rank 0's, a parameter differs from rank 0's, or P < 2 over
+            all ranks.
     """
     problem = _local_problem(views)
     meta = None
@@ -104,14 +106,22 @@ def _shard_layout(
         "the all_gather of the shards' shapes",
         dist.all_gather_object,
         gathered,
-        (problem, meta),
+        (problem, meta, params),
         group=group,
     )
-    records: list[tuple[str | None, tuple[int, tuple[int, ...], str] | None]] = gathered  # type: ignore[assignment]
-    errors = [f"rank {r}: {p}" for r, (p, _) in enumerate(records) if p is not None]
+    records: list[tuple[str | None, tuple[int, tuple[int, ...], str] | None, dict[str, object]]]
+    records = gathered  # type: ignore[assignment]
+    errors = [f"rank {r}: {p}" for r, (p, _, _) in enumerate(records) if p is not None]
+    # Differing parameters would fail later in a collective of another size (SIGABRT).
+    errors += [
+        f"rank {r}: {key}={value!r} differs from rank 0's {records[0][2][key]!r}"
+        for r, (_, _, theirs) in enumerate(records)
+        for key, value in theirs.items()
+        if value != records[0][2][key]
+    ]
     if errors:
         raise ValueError("fit_distributed got bad views: " + "; ".join(errors))
-    metas = [m for _, m in records if m is not None]
+    metas = [m for _, m, _ in records if m is not None]
     first = metas[0]
     for r, m in enumerate(metas):
         if m[1:] != first[1:]:
@@ -184,8 +194,9 @@ def fit_distributed(
             a peer rank left.
         TimeoutError: a collective did not complete within the process group's timeout
             (``init_process_group(timeout=...)``): a rank stalled or died.
-        ValueError: on every rank, when any rank has no views, bad or non-finite views, or
-            a view shape or dtype different from rank 0's; ``n_components`` above the rank,
+        ValueError: on every rank, when any rank has no views, bad or non-finite views, a
+            view shape or dtype or a parameter (``n_components``, ``method``, ``oversample``,
+            ``n_iter``, ``seed``) different from rank 0's; ``n_components`` above the rank,
             or an energy fraction the randomized sketch does not reach.
     """
     if not dist.is_available() or not dist.is_initialized():
@@ -194,7 +205,14 @@ def fit_distributed(
     if method not in _METHODS:
         raise ValueError(f"method={method!r} must be one of {_METHODS}")
     rank = dist.get_rank(group)
-    counts, feature_shape = _shard_layout(views, rank, group)
+    params: dict[str, object] = {
+        "n_components": n_components,
+        "method": method,
+        "oversample": oversample,
+        "n_iter": n_iter,
+        "seed": seed,
+    }
+    counts, feature_shape = _shard_layout(views, rank, group, params)
     n_views = sum(counts)
     image_shape = (feature_shape[0], feature_shape[1], feature_shape[2]) if len(feature_shape) == 3 else None
     dtype = views.dtype

@@ -19,7 +19,7 @@ import math
 import torch
 
 from torch_eigview.check import check_number
-from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.geometry.correspondence import Correspondence, check_correspondence
 from torch_eigview.geometry.pose import affine_coefficients, orthographic_coefficients
 from torch_eigview.warp.base import ViewWarp
 from torch_eigview.warp.maps import RowGeometry, WarpMaps
@@ -127,7 +127,7 @@ class NovelViewWarp(ViewWarp):
             as given ((T,) or (B, T)); ``src_y`` is None unless the camera has an elevation.
         """
         self._check_n_sources(n_sources)
-        d12 = correspondence.disparity_12
+        d12 = check_correspondence(correspondence).disparity_12
         dtype, device = d12.dtype, d12.device
         b_objects, _, w = correspondence.shape
         theta = self._novel_angles(thetas, batch=b_objects)

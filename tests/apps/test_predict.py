@@ -1,0 +1,202 @@
+"""``eigview predict`` against damaged models and hostile inputs: the graph checked before it
+runs, special files refused unopened, damaged rows reported per row, names escaped."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+import skimage.io
+import torch
+from onnx import helper, numpy_helper
+
+from torch_eigview.apps.cli import main
+from torch_eigview.apps.predict import escape
+from torch_eigview.decomposition import Eigenspace
+from torch_eigview.io.onnx import export_recognizer
+from torch_eigview.io.onnx_check import check_recognizer_graph
+from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.nn.recognition import NearestNeighborRecognizer
+
+from tests.helpers import rand
+
+SHAPE = (1, 8, 8)
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A recognizer of 3 labels over 9 random 8x8 views, exported."""
+    views = rand(9, *SHAPE, dtype=torch.float32)
+    projection = Eigenspace(3).fit(views).to_module()
+    labels = torch.arange(9) % 3
+    rec = NearestNeighborRecognizer.from_views(projection, views, labels, torch.arange(9.0), ["a", "b", "c"])
+    path = tmp_path_factory.mktemp("model") / "rec.onnx"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        export_recognizer(rec, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
+    out = tmp_path_factory.mktemp("images")
+    rng = np.random.default_rng(0)
+    paths = []
+    for i in range(3):
+        path = out / f"img{i}.png"
+        skimage.io.imsave(path, rng.integers(0, 256, SHAPE[1:], dtype=np.uint8), check_contrast=False)
+        paths.append(str(path))
+    return paths
+
+
+def _rewrite(src: Path, dst: Path, edit: object) -> Path:
+    m = onnx.load(str(src))
+    edit(m)  # type: ignore[operator]
+    onnx.save(m, str(dst))
+    return dst
+
+
+def _set_meta(m: onnx.ModelProto, key: str, value: str) -> None:
+    for p in m.metadata_props:
+        if p.key == key:
+            p.value = value
+
+
+def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = int(exc.code)  # type: ignore[arg-type]
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_escape() -> None:
+    assert escape("obj\x1b[31m\nFAKE\tx\u2028") == "obj\\x1b[31m\\nFAKE\\tx\\u2028"
+    assert escape("plain name 7") == "plain name 7"
+
+
+def test_label_names_printed_escaped(
+    model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    names = json.dumps(["\x1b[2J", "b\nimg9.png\tlabel x", "c\x1b[31m\r"])
+    bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", names))
+    code, out, _ = _run(["predict", "--onnx", str(bad), *images], capsys)
+    assert code == 0
+    assert "\x1b" not in out and "\r" not in out and len(out.splitlines()) == len(images)
+    assert any(
+        t in out for t in ("label \\x1b[2J\t", "label b\\nimg9.png\\tlabel x\t", "label c\\x1b[31m\\r\t")
+    )
+
+
+def test_wrong_label_list_length_is_a_per_row_error(
+    model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", json.dumps(["a"])))
+    code, _, err = _run(["predict", "--onnx", str(bad), *images, "--json", str(tmp_path / "p.json")], capsys)
+    assert code == 1
+    assert "outside its 1 label names" in err
+    rows = json.loads((tmp_path / "p.json").read_text())
+    assert all(r["label"] == "a" for r in rows) and len(rows) + err.count("outside its") == len(images)
+
+
+def _poison_codes(m: onnx.ModelProto) -> None:
+    for t in m.graph.initializer:
+        if "codes" in t.name:
+            arr = numpy_helper.to_array(t).copy()
+            arr.flat[0] = np.nan
+            t.CopyFrom(numpy_helper.from_array(arr, t.name))
+            return
+    raise AssertionError("no codes initializer")
+
+
+def test_tampered_codes_refused_before_running(
+    model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = _rewrite(model, tmp_path / "m.onnx", _poison_codes)
+    code, out, err = _run(["predict", "--onnx", str(bad), *images], capsys)
+    assert code == 2 and out == ""
+    assert "codes" in err and "NaN or infinite" in err
+
+
+def _add_expand(m: onnx.ModelProto) -> None:
+    shape = numpy_helper.from_array(np.array([1 << 20, 1 << 20], dtype=np.int64), "huge_shape")
+    m.graph.initializer.append(shape)
+    m.graph.node.append(helper.make_node("Expand", ["distance", "huge_shape"], ["blown"]))
+
+
+def test_foreign_operator_refused(model: Path, tmp_path: Path) -> None:
+    bad = _rewrite(model, tmp_path / "m.onnx", _add_expand)
+    info = OnnxModelInfo.from_props({p.key: p.value for p in onnx.load(str(model)).metadata_props})
+    with pytest.raises(
+        ValueError, match=r"operators a torch_eigview recognizer never has: \['ai.onnx:Expand'\]"
+    ):
+        check_recognizer_graph(bad, info)
+    check_recognizer_graph(model, info)  # the real export passes
+
+
+def test_wrong_input_shape_refused(model: Path, tmp_path: Path) -> None:
+    info = OnnxModelInfo.from_props({p.key: p.value for p in onnx.load(str(model)).metadata_props})
+    other = OnnxModelInfo(info.kind, (1, 8, 9), info.n_components, info.unit_norm, info.label_names)
+    with pytest.raises(ValueError, match=r"must have one input 'images' \(B, 1, 8, 9\)"):
+        check_recognizer_graph(model, other)
+
+
+def test_weight_budget(model: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    info = OnnxModelInfo.from_props({p.key: p.value for p in onnx.load(str(model)).metadata_props})
+    monkeypatch.setenv("EIGVIEW_MAX_MODEL_BYTES", "64")
+    with pytest.raises(ValueError, match="EIGVIEW_MAX_MODEL_BYTES"):
+        check_recognizer_graph(model, info)
+    monkeypatch.setenv("EIGVIEW_MAX_MODEL_BYTES", "lots")
+    with pytest.raises(ValueError, match=r"EIGVIEW_MAX_MODEL_BYTES='lots' must be a positive integer"):
+        check_recognizer_graph(model, info)
+
+
+def test_fifo_model_and_fifo_image_never_opened(model: Path, images: list[str], tmp_path: Path) -> None:
+    fifo = tmp_path / "pipe.png"
+    os.mkfifo(fifo)
+    fifo_model = tmp_path / "pipe.onnx"
+    os.mkfifo(fifo_model)
+    argv = [
+        sys.executable,
+        "-m",
+        "torch_eigview.apps.predict",
+        "--onnx",
+        str(model),
+        images[0],
+        str(fifo),
+        images[1],
+    ]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1, proc.stderr
+    assert "pipe.png is a FIFO (named pipe), not a regular file" in proc.stderr
+    assert len(proc.stdout.splitlines()) == 2
+    argv = [sys.executable, "-m", "torch_eigview.apps.predict", "--onnx", str(fifo_model), images[0]]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "pipe.onnx is a FIFO" in proc.stderr
+
+
+def test_float_tiff_outside_range_is_an_error(
+    model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import tifffile
+
+    big = tmp_path / "big.tif"
+    tifffile.imwrite(big, np.full(SHAPE[1:], 1e32, dtype=np.float32))
+    code, out, err = _run(["predict", "--onnx", str(model), images[0], str(big)], capsys)
+    assert code == 1 and "values outside [0, 1]" in err and len(out.splitlines()) == 1
+
+
+def test_many_images_in_batches(model: Path, images: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    many = images * 50  # 150 paths: three batches of up to 64
+    code, out, _ = _run(["predict", "--onnx", str(model), *many], capsys)
+    lines = out.splitlines()
+    assert code == 0 and len(lines) == len(many)
+    assert lines[:3] == lines[3:6] == lines[-3:]
