@@ -22,6 +22,7 @@ from torch_eigview.apps.predict import escape
 from torch_eigview.decomposition import Eigenspace
 from torch_eigview.io.onnx import export_recognizer
 from torch_eigview.io.onnx_check import check_recognizer_graph
+from torch_eigview.io.onnx_checksum import DIGEST_KEY, append_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -57,9 +58,15 @@ def images(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
 
 
 def _rewrite(src: Path, dst: Path, edit: object) -> Path:
+    """A crafted model: ``src`` edited, with a valid checksum (what an attacker who
+    re-signs the file, or a bug in an exporter, would hand to predict)."""
     m = onnx.load(str(src))
+    kept = [p for p in m.metadata_props if p.key != DIGEST_KEY]
+    del m.metadata_props[:]
+    m.metadata_props.extend(kept)
     edit(m)  # type: ignore[operator]
     onnx.save(m, str(dst))
+    append_checksum(dst)
     return dst
 
 
