@@ -60,7 +60,8 @@ __all__ = [
 ]
 
 _FAST_TVL1 = {"num_warp": 3, "num_iter": 5}
-# |elevation| an "auto" estimate may have: what NovelViewWarp accepts, strictly below 90.
+#: The largest absolute elevation (degrees) an "auto" estimate may have: what NovelViewWarp
+#: accepts, strictly below 90.
 MAX_AUTO_ELEVATION = 89.0
 
 
