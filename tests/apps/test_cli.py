@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from torch_eigview.apps.cli import main, progress_bar
+from torch_eigview.apps.cli import main
+from torch_eigview.apps.cli_args import progress_bar
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.io.checkpoint import load_recognizer
 

@@ -31,7 +31,7 @@ import torch
 from torch_eigview.apps.bench_plot import plot_results
 from torch_eigview.apps.bench_scaling import bench_coil100, bench_scaling, run_case, smooth_views
 from torch_eigview.apps.bench_speed import run_sections
-from torch_eigview.apps.cli import threads_arg
+from torch_eigview.apps.cli_args import threads_arg
 from torch_eigview.files import check_outputs, write_json
 from torch_eigview.scale.thread_policy import threads
 

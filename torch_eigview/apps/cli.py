@@ -11,305 +11,73 @@ Torch-using modules are imported inside the subcommands: ``predict`` never impor
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import warnings
-from collections.abc import Callable, Iterable, Sequence
-from functools import partial
-from typing import TYPE_CHECKING, TypeVar
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
+from torch_eigview.apps.cli_args import (
+    MIN_OPSET,
+    add_quiet,
+    add_threads,
+    bounded_int_arg,
+    finite_arg,
+    opset_arg,
+    progress_bar,
+)
+from torch_eigview.apps.coil_command import add_coil_command, run_coil
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
-    import torch
+    pass
 
-    from torch_eigview.apps.experiment import CoilResult
-    from torch_eigview.datasets.coil import CoilFolder
+__all__ = ["main"]
 
-__all__ = ["main", "progress_bar"]
 
-T = TypeVar("T")
-
-MIN_OPSET = 18  # what torch_eigview.io.onnx exports
 # Image side of the rendered demo and synth scenes: memory grows with its square.
 SIZE_LIMIT = ("EIGVIEW_MAX_IMAGE_SIDE", 512)
-
-
-def _components(text: str) -> int | float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--components must be an int or a fraction in (0, 1), got {text!r}"
-        ) from None
-    if value.is_integer() and value >= 1:
-        return int(value)
-    if 0 < value < 1:
-        return value
-    raise argparse.ArgumentTypeError(
-        f"--components must be an int >= 1 or a fraction in (0, 1), got {text!r}"
-    )
-
-
-def _word_or_float(text: str, word: str, message: str) -> float | str:
-    """``word`` itself, or ``text`` as a float; ``message`` is the argparse error otherwise."""
-    if text == word:
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(message) from None
-
-
-def _finite(flag: str) -> Callable[[str], float]:
-    """An argparse type: a finite number, the error naming ``flag`` (never an internal name)."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{flag} must be a finite number, got {text!r}")
-        return value
-
-    return parse
-
-
-def _bounded_int(flag: str, minimum: int, limit: tuple[str, int] | None = None) -> Callable[[str], int]:
-    """An argparse type: an int >= ``minimum`` and at most ``limit`` (an environment variable
-    that raises it, and its default), the error naming ``flag``."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"{flag}={value} must be >= {minimum}")
-        if limit is not None:
-            from torch_eigview.check import check_limit  # imports torch: not on predict's path
-
-            try:
-                check_limit(value, flag, "pixels per image side", *limit)
-            except ValueError as exc:
-                raise argparse.ArgumentTypeError(str(exc)) from None
-        return value
-
-    return parse
-
-
-def _opset(text: str) -> int:
-    import onnx
-
-    newest = onnx.defs.onnx_opset_version()
-    value = _bounded_int("--opset", MIN_OPSET)(text)
-    if value > newest:
-        # The exporter would silently write another opset than the one asked for.
-        raise argparse.ArgumentTypeError(
-            f"--opset={value} must be at most {newest}, the newest opset of the installed onnx {onnx.__version__}"
-        )
-    return value
-
-
-def _elevation(text: str) -> float | str:
-    return _word_or_float(text, "auto", f"--elevation must be 'auto' or degrees, got {text!r}")
-
-
-def _objects(text: str) -> list[int]:
-    from torch_eigview.datasets.coil import parse_object_spec
-
-    try:
-        return parse_object_spec(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _gamma(text: str) -> float | str:
-    return _word_or_float(text, "median", f"--gamma must be a number > 0 or 'median', got {text!r}")
-
-
-def _add_coil(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    coil = sub.add_parser("coil", help="the COIL recognition experiment (paper Fig. 4(b))")
-    coil.add_argument(
-        "--root",
-        default=None,
-        help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100); default: coil-20-proc/ in "
-        "$TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc beside the checkout",
-    )
-    coil.add_argument(
-        "--alpha",
-        type=_finite("--alpha"),
-        default=None,
-        help="angle between seed views, degrees (required without --seeds)",
-    )
-    coil.add_argument(
-        "--center", type=_finite("--center"), default=0.0, help="pose of the first seed view, degrees"
-    )
-    coil.add_argument(
-        "--views", type=int, default=None, choices=(2, 3), help="seed views per object (default 2)"
-    )
-    coil.add_argument(
-        "--seeds",
-        type=int,
-        default=None,
-        metavar="M",
-        help="the full circle: M seed views 360/M degrees apart from --center, every sector synthesized, "
-        "every other pose tested (instead of --alpha and --views)",
-    )
-    coil.add_argument(
-        "--pose",
-        choices=("nearest", "interpolate"),
-        default="nearest",
-        help="the reported pose: the nearest gallery view's, or interpolated on the appearance "
-        "manifold between it and its neighbours (Murase and Nayar); default nearest",
-    )
-    coil.add_argument(
-        "--dense-step",
-        type=_finite("--dense-step"),
-        default=None,
-        metavar="S",
-        help="with --seeds and --method dense: real views every S degrees (default about 180/M)",
-    )
-    coil.add_argument(
-        "--synth",
-        type=_finite("--synth"),
-        nargs=3,
-        default=(-20.0, 20.0, 1.0),
-        metavar=("START", "STOP", "STEP"),
-        help="synthesized angles for two seed views; each further seed extends the range by alpha",
-    )
-    coil.add_argument(
-        "--test", type=_finite("--test"), nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP")
-    )
-    coil.add_argument("--components", type=_components, default=15, help="k, or an energy fraction in (0, 1)")
-    coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
-    coil.add_argument("--objects", type=_objects, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
-    coil.add_argument(
-        "--flow", choices=("tvl1", "ilk"), default="tvl1", help="optical flow for correspondences"
-    )
-    coil.add_argument(
-        "--elevation", type=_elevation, default="auto", help="camera elevation, degrees, or 'auto' (default)"
-    )
-    coil.add_argument(
-        "--blend",
-        choices=("linear", "nearest"),
-        default="linear",
-        help="pixels both seeds see: cross-dissolve by angle, or the nearer seed alone",
-    )
-    coil.add_argument(
-        "--silhouette",
-        action="store_true",
-        help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
-    )
-    coil.add_argument(
-        "--pose-unit",
-        choices=("auto", "index", "degrees"),
-        default="auto",
-        help="file pose P: an index (COIL-20, 5*P degrees), degrees (COIL-100), or auto (default)",
-    )
-    coil.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
-    coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
-    coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
-    coil.add_argument("--save", metavar="FILE", help="write the fitted eigenspace and gallery")
-    coil.add_argument(
-        "--kernel",
-        choices=("rbf", "poly", "cosine", "linear"),
-        default=None,
-        help="kernel PCA instead of the linear eigenspace (not with --save)",
-    )
-    coil.add_argument(
-        "--gamma", type=_gamma, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
-    )
-    coil.add_argument(
-        "--device",
-        choices=("cpu", "cuda"),
-        default="cpu",
-        help="where the views, the warp, the eigenspace and recognition run (the optical flow "
-        "stays on the CPU: scikit-image)",
-    )
-    _add_quiet(coil)
-    _add_threads(coil)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True)
-    _add_coil(sub)
+    add_coil_command(sub)
     _add_export_and_predict(sub)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
     demo.add_argument(
-        "--alpha", type=_finite("--alpha"), default=10.0, help="angle between the two seed views, degrees"
+        "--alpha", type=finite_arg("--alpha"), default=10.0, help="angle between the two seed views, degrees"
     )
     demo.add_argument(
-        "--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+        "--size", type=bounded_int_arg("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
     )
     demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
     demo.add_argument("--json", metavar="FILE", help="write the results as JSON")
-    _add_quiet(demo)
-    _add_threads(demo)
+    add_quiet(demo)
+    add_threads(demo)
     synth = sub.add_parser(
         "synth", help="the Fig. 2 protocol per camera model (orthographic, affine, perspective)"
     )
     synth.add_argument("--camera", choices=("orthographic", "affine", "perspective"), default="orthographic")
     synth.add_argument(
-        "--alpha", type=_finite("--alpha"), nargs="+", default=[5.0, 10.0, 15.0, 20.0, 30.0], help="degrees"
+        "--alpha",
+        type=finite_arg("--alpha"),
+        nargs="+",
+        default=[5.0, 10.0, 15.0, 20.0, 30.0],
+        help="degrees",
     )
     synth.add_argument("--views", type=int, nargs="+", choices=(2, 3), default=[2, 3], help="seed views N")
     synth.add_argument(
-        "--size", type=_bounded_int("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+        "--size", type=bounded_int_arg("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
     )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
-    _add_quiet(synth)
-    _add_threads(synth)
+    add_quiet(synth)
+    add_threads(synth)
     # Listed for --help; main() hands its arguments to torch_eigview.apps.bench unparsed.
     sub.add_parser("bench", help="benchmarks (warp, eigen step, GEMM, scaling): eigview bench --help")
     return parser
-
-
-def _add_quiet(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)"
-    )
-
-
-def threads_arg(text: str) -> int:
-    """``--threads N``: an int >= 1 (argparse type)."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--threads must be an integer >= 1, got {text!r}")
-    return value
-
-
-def _add_threads(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--threads",
-        type=threads_arg,
-        default=None,
-        metavar="N",
-        help="torch intra-op threads (default 1: a second thread gains little here and spins "
-        "when another process keeps the cores busy)",
-    )
-
-
-def progress_bar(quiet: bool, desc: str, unit: str) -> Callable[[Iterable[T]], Iterable[T]] | None:
-    """A tqdm wrapper for a command's main loop, or None when ``quiet`` or stderr is no terminal.
-
-    The bar goes to stderr, so it shows whenever a person watches the command, even with
-    stdout redirected to a file; a log or a pipe (stderr not a TTY) gets no bar.
-    ``leave=False``: the bar disappears when done, and the results print below it alone.
-    """
-    if quiet or not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-
-    return partial(tqdm, desc=desc, unit=unit, leave=False, file=sys.stderr)
 
 
 def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -323,7 +91,7 @@ def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentPar
         action="store_true",
         help="export the whole recognizer (images -> label, pose, distance), not just the projection",
     )
-    export.add_argument("--opset", type=_opset, default=MIN_OPSET, help="ONNX opset (>= 18)")
+    export.add_argument("--opset", type=opset_arg, default=MIN_OPSET, help="ONNX opset (>= 18)")
     predict = sub.add_parser("predict", help="recognize images with an exported ONNX recognizer (no torch)")
     add_arguments(predict)
 
@@ -344,121 +112,6 @@ def _run_export(args: argparse.Namespace) -> int:
         f"unit_norm={info.unit_norm}" + (f", {len(info.label_names)} labels" if info.label_names else "")
     )
     return 0
-
-
-def format_table(result: CoilResult, title: str) -> str:
-    """The per-object accuracy table of Fig. 4(b), then the total."""
-    lines = [title, f"{'object':>8} {'accuracy (%)':>13}"]
-    lines += [f"{'O' + str(obj):>8} {acc:13.2f}" for obj, acc in result.per_object.items()]
-    lines.append(f"{'Total':>8} {result.accuracy:13.2f}")
-    lines.append(
-        f"test images {result.n_test}, gallery views {result.n_train_views}, "
-        f"pose MAE (correct matches) {result.pose_mae_deg:.2f} deg"
-    )
-    lines.append("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in result.seconds.items()))
-    return "\n".join(lines)
-
-
-def _check_circle_flags(args: argparse.Namespace) -> None:
-    """The flag combinations of the full circle that need no folder to refuse."""
-    if args.seeds is None:
-        if args.alpha is None:
-            raise ValueError("--alpha is required (the angle between seed views), unless --seeds is given")
-        if args.dense_step is not None:
-            raise ValueError(f"--dense-step {args.dense_step:g} needs --seeds (the full circle)")
-        return
-    if args.seeds < 2:
-        raise ValueError(f"--seeds={args.seeds} must be >= 2")
-    if args.views is not None:
-        raise ValueError(
-            f"--seeds {args.seeds} places its own seed views: it cannot take --views {args.views}"
-        )
-    if args.alpha is not None and abs(args.alpha - 360.0 / args.seeds) > 1e-9:
-        raise ValueError(
-            f"--alpha {args.alpha:g} contradicts --seeds {args.seeds} (seeds 360/{args.seeds} = "
-            f"{360.0 / args.seeds:g} degrees apart); leave --alpha out"
-        )
-    if args.dense_step is not None and args.method != "dense":
-        raise ValueError(f"--dense-step {args.dense_step:g} needs --method dense, got --method {args.method}")
-
-
-def _run_coil(args: argparse.Namespace) -> int:
-    from torch_eigview.apps.experiment import CoilExperiment
-    from torch_eigview.datasets.coil import CoilFolder, find_coil_root
-    from torch_eigview.io.checkpoint import save_recognizer
-    from torch_eigview.synthesis import SynthesisOptions
-
-    check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
-    folder = _on_device(CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit), _device(args.device))
-    _check_circle_flags(args)
-    experiment = CoilExperiment(
-        alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
-        center=args.center,
-        views=args.views or 2,
-        synth=tuple(args.synth),
-        test=tuple(args.test),
-        components=args.components,
-        method=args.method,
-        objects=args.objects,
-        unit_norm=not args.no_unit_norm,
-        synthesis=SynthesisOptions(
-            flow=args.flow,
-            elevation=args.elevation,
-            extent=not args.no_extent,
-            blend=args.blend,
-            silhouette=args.silhouette,
-        ),
-        kernel=args.kernel,
-        gamma=args.gamma,
-        seeds=args.seeds,
-        dense_step=args.dense_step,
-        interpolate_pose=args.pose == "interpolate",
-    )
-    if args.seeds is not None:
-        experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
-    if args.kernel and args.save:
-        raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
-    result = experiment.run(folder, progress=progress_bar(args.quiet, f"{args.method} objects", "obj"))
-    if args.seeds is None:
-        title = (
-            f"COIL {args.method}: alpha={args.alpha:g}, {experiment.views} seed views, center={args.center:g}"
-        )
-    else:
-        title = f"COIL {args.method}: full circle, {args.seeds} seed views from center={args.center:g}"
-    if args.kernel:
-        title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
-    print(format_table(result, title))
-    if args.json:
-        write_json(args.json, result.to_json())
-    if args.save:
-        meta = {"command": "coil", "alpha": args.alpha, "method": args.method, "accuracy": result.accuracy}
-        save_recognizer(args.save, result.recognizer, meta)
-    return 0
-
-
-def _device(name: str) -> torch.device:
-    import torch
-
-    if name == "cuda" and not torch.cuda.is_available():
-        raise ValueError("--device cuda needs a CUDA device, but torch.cuda.is_available() is False")
-    return torch.device(name)
-
-
-def _on_device(folder: CoilFolder, device: torch.device) -> CoilFolder:
-    """``folder`` whose images arrive on ``device``: the whole experiment then runs there
-    (seeds, warp, eigenspace, recognition) except the optical flow, which scikit-image runs
-    on the CPU (the correspondence moves the seeds there and its result back)."""
-    if device.type == "cpu":
-        return folder
-    from torch_eigview.datasets.coil import CoilFolder
-
-    class DeviceFolder(CoilFolder):
-        def images(self, obj: int, degrees_list: Sequence[float] | torch.Tensor) -> torch.Tensor:
-            return super().images(obj, degrees_list).to(device)
-
-    moved = DeviceFolder.__new__(DeviceFolder)
-    moved.__dict__.update(folder.__dict__)
-    return moved
 
 
 def _run_demo(args: argparse.Namespace) -> int:
@@ -521,7 +174,7 @@ def _show_warning(message: Warning | str, category: type[Warning], *_: object, *
 
 def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     try:
-        runs = {"coil": _run_coil, "demo": _run_demo, "synth": _run_synth}
+        runs = {"coil": run_coil, "demo": _run_demo, "synth": _run_synth}
         if args.command in runs:
             from torch_eigview.scale.thread_policy import threads
 

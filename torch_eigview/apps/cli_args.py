@@ -1,0 +1,170 @@
+"""The ``eigview`` command's argument types and shared options.
+
+Each type names the flag the user typed in its error (never an internal variable), and
+imports torch only where it must, so that ``eigview predict`` stays torch-free.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Callable, Iterable
+from functools import partial
+from typing import TypeVar
+
+__all__ = [
+    "MIN_OPSET",
+    "add_quiet",
+    "add_threads",
+    "bounded_int_arg",
+    "components_arg",
+    "elevation_arg",
+    "finite_arg",
+    "gamma_arg",
+    "objects_arg",
+    "opset_arg",
+    "progress_bar",
+    "threads_arg",
+    "word_or_float",
+]
+
+T = TypeVar("T")
+
+MIN_OPSET = 18  # what torch_eigview.io.onnx exports
+
+
+def components_arg(text: str) -> int | float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--components must be an int or a fraction in (0, 1), got {text!r}"
+        ) from None
+    if value.is_integer() and value >= 1:
+        return int(value)
+    if 0 < value < 1:
+        return value
+    raise argparse.ArgumentTypeError(
+        f"--components must be an int >= 1 or a fraction in (0, 1), got {text!r}"
+    )
+
+
+def word_or_float(text: str, word: str, message: str) -> float | str:
+    """``word`` itself, or ``text`` as a float; ``message`` is the argparse error otherwise."""
+    if text == word:
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(message) from None
+
+
+def finite_arg(flag: str) -> Callable[[str], float]:
+    """An argparse type: a finite number, the error naming ``flag`` (never an internal name)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{flag} must be a finite number, got {text!r}")
+        return value
+
+    return parse
+
+
+def bounded_int_arg(flag: str, minimum: int, limit: tuple[str, int] | None = None) -> Callable[[str], int]:
+    """An argparse type: an int >= ``minimum`` and at most ``limit`` (an environment variable
+    that raises it, and its default), the error naming ``flag``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{flag}={value} must be >= {minimum}")
+        if limit is not None:
+            from torch_eigview.check import check_limit  # imports torch: not on predict's path
+
+            try:
+                check_limit(value, flag, "pixels per image side", *limit)
+            except ValueError as exc:
+                raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+
+    return parse
+
+
+def opset_arg(text: str) -> int:
+    import onnx
+
+    newest = onnx.defs.onnx_opset_version()
+    value = bounded_int_arg("--opset", MIN_OPSET)(text)
+    if value > newest:
+        # The exporter would silently write another opset than the one asked for.
+        raise argparse.ArgumentTypeError(
+            f"--opset={value} must be at most {newest}, the newest opset of the installed onnx {onnx.__version__}"
+        )
+    return value
+
+
+def elevation_arg(text: str) -> float | str:
+    return word_or_float(text, "auto", f"--elevation must be 'auto' or degrees, got {text!r}")
+
+
+def objects_arg(text: str) -> list[int]:
+    from torch_eigview.datasets.coil import parse_object_spec
+
+    try:
+        return parse_object_spec(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def gamma_arg(text: str) -> float | str:
+    return word_or_float(text, "median", f"--gamma must be a number > 0 or 'median', got {text!r}")
+
+
+def add_quiet(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)"
+    )
+
+
+def threads_arg(text: str) -> int:
+    """``--threads N``: an int >= 1 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--threads must be an integer >= 1, got {text!r}")
+    return value
+
+
+def add_threads(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--threads",
+        type=threads_arg,
+        default=None,
+        metavar="N",
+        help="torch intra-op threads (default 1: a second thread gains little here and spins "
+        "when another process keeps the cores busy)",
+    )
+
+
+def progress_bar(quiet: bool, desc: str, unit: str) -> Callable[[Iterable[T]], Iterable[T]] | None:
+    """A tqdm wrapper for a command's main loop, or None when ``quiet`` or stderr is no terminal.
+
+    The bar goes to stderr, so it shows whenever a person watches the command, even with
+    stdout redirected to a file; a log or a pipe (stderr not a TTY) gets no bar.
+    ``leave=False``: the bar disappears when done, and the results print below it alone.
+    """
+    if quiet or not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return partial(tqdm, desc=desc, unit=unit, leave=False, file=sys.stderr)

@@ -1,0 +1,260 @@
+"""``eigview coil``: the paper's COIL experiment (Fig. 4(b)) and the full circle.
+
+The command's arguments (:func:`add_coil_command`) and its run (:func:`run_coil`): a
+folder of ``obj{O}__{P}.png`` images in, a per-object accuracy table out.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from torch_eigview.apps.cli_args import (
+    add_quiet,
+    add_threads,
+    components_arg,
+    elevation_arg,
+    finite_arg,
+    gamma_arg,
+    objects_arg,
+    progress_bar,
+)
+from torch_eigview.files import check_outputs, write_json
+
+if TYPE_CHECKING:
+    import torch
+
+    from torch_eigview.apps.experiment import CoilResult
+    from torch_eigview.datasets.coil import CoilFolder
+
+__all__ = ["add_coil_command", "format_table", "run_coil"]
+
+
+def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Adds ``eigview coil`` and its options to the command's subparsers."""
+    coil = sub.add_parser("coil", help="the COIL recognition experiment (paper Fig. 4(b))")
+    coil.add_argument(
+        "--root",
+        default=None,
+        help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100); default: coil-20-proc/ in "
+        "$TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc beside the checkout",
+    )
+    coil.add_argument(
+        "--alpha",
+        type=finite_arg("--alpha"),
+        default=None,
+        help="angle between seed views, degrees (required without --seeds)",
+    )
+    coil.add_argument(
+        "--center", type=finite_arg("--center"), default=0.0, help="pose of the first seed view, degrees"
+    )
+    coil.add_argument(
+        "--views", type=int, default=None, choices=(2, 3), help="seed views per object (default 2)"
+    )
+    coil.add_argument(
+        "--seeds",
+        type=int,
+        default=None,
+        metavar="M",
+        help="the full circle: M seed views 360/M degrees apart from --center, every sector synthesized, "
+        "every other pose tested (instead of --alpha and --views)",
+    )
+    coil.add_argument(
+        "--pose",
+        choices=("nearest", "interpolate"),
+        default="nearest",
+        help="the reported pose: the nearest gallery view's, or interpolated on the appearance "
+        "manifold between it and its neighbours (Murase and Nayar); default nearest",
+    )
+    coil.add_argument(
+        "--dense-step",
+        type=finite_arg("--dense-step"),
+        default=None,
+        metavar="S",
+        help="with --seeds and --method dense: real views every S degrees (default about 180/M)",
+    )
+    _add_method_arguments(coil)
+
+
+def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
+    """The gallery, synthesis, eigenspace and output options of ``eigview coil``."""
+    coil.add_argument(
+        "--synth",
+        type=finite_arg("--synth"),
+        nargs=3,
+        default=(-20.0, 20.0, 1.0),
+        metavar=("START", "STOP", "STEP"),
+        help="synthesized angles for two seed views; each further seed extends the range by alpha",
+    )
+    coil.add_argument(
+        "--test", type=finite_arg("--test"), nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP")
+    )
+    coil.add_argument(
+        "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
+    )
+    coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
+    coil.add_argument("--objects", type=objects_arg, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
+    coil.add_argument(
+        "--flow", choices=("tvl1", "ilk"), default="tvl1", help="optical flow for correspondences"
+    )
+    coil.add_argument(
+        "--elevation",
+        type=elevation_arg,
+        default="auto",
+        help="camera elevation, degrees, or 'auto' (default)",
+    )
+    coil.add_argument(
+        "--blend",
+        choices=("linear", "nearest"),
+        default="linear",
+        help="pixels both seeds see: cross-dissolve by angle, or the nearer seed alone",
+    )
+    coil.add_argument(
+        "--silhouette",
+        action="store_true",
+        help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
+    )
+    coil.add_argument(
+        "--pose-unit",
+        choices=("auto", "index", "degrees"),
+        default="auto",
+        help="file pose P: an index (COIL-20, 5*P degrees), degrees (COIL-100), or auto (default)",
+    )
+    coil.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
+    coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
+    coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    coil.add_argument("--save", metavar="FILE", help="write the fitted eigenspace and gallery")
+    coil.add_argument(
+        "--kernel",
+        choices=("rbf", "poly", "cosine", "linear"),
+        default=None,
+        help="kernel PCA instead of the linear eigenspace (not with --save)",
+    )
+    coil.add_argument(
+        "--gamma", type=gamma_arg, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
+    )
+    coil.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        default="cpu",
+        help="where the views, the warp, the eigenspace and recognition run (the optical flow "
+        "stays on the CPU: scikit-image)",
+    )
+    add_quiet(coil)
+    add_threads(coil)
+
+
+def format_table(result: CoilResult, title: str) -> str:
+    """The per-object accuracy table of Fig. 4(b), then the total."""
+    lines = [title, f"{'object':>8} {'accuracy (%)':>13}"]
+    lines += [f"{'O' + str(obj):>8} {acc:13.2f}" for obj, acc in result.per_object.items()]
+    lines.append(f"{'Total':>8} {result.accuracy:13.2f}")
+    lines.append(
+        f"test images {result.n_test}, gallery views {result.n_train_views}, "
+        f"pose MAE (correct matches) {result.pose_mae_deg:.2f} deg"
+    )
+    lines.append("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in result.seconds.items()))
+    return "\n".join(lines)
+
+
+def _check_circle_flags(args: argparse.Namespace) -> None:
+    """The flag combinations of the full circle that need no folder to refuse."""
+    if args.seeds is None:
+        if args.alpha is None:
+            raise ValueError("--alpha is required (the angle between seed views), unless --seeds is given")
+        if args.dense_step is not None:
+            raise ValueError(f"--dense-step {args.dense_step:g} needs --seeds (the full circle)")
+        return
+    if args.seeds < 2:
+        raise ValueError(f"--seeds={args.seeds} must be >= 2")
+    if args.views is not None:
+        raise ValueError(
+            f"--seeds {args.seeds} places its own seed views: it cannot take --views {args.views}"
+        )
+    if args.alpha is not None and abs(args.alpha - 360.0 / args.seeds) > 1e-9:
+        raise ValueError(
+            f"--alpha {args.alpha:g} contradicts --seeds {args.seeds} (seeds 360/{args.seeds} = "
+            f"{360.0 / args.seeds:g} degrees apart); leave --alpha out"
+        )
+    if args.dense_step is not None and args.method != "dense":
+        raise ValueError(f"--dense-step {args.dense_step:g} needs --method dense, got --method {args.method}")
+
+
+def run_coil(args: argparse.Namespace) -> int:
+    from torch_eigview.apps.experiment import CoilExperiment
+    from torch_eigview.datasets.coil import CoilFolder, find_coil_root
+    from torch_eigview.io.checkpoint import save_recognizer
+    from torch_eigview.synthesis import SynthesisOptions
+
+    check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
+    folder = _on_device(CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit), _device(args.device))
+    _check_circle_flags(args)
+    experiment = CoilExperiment(
+        alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
+        center=args.center,
+        views=args.views or 2,
+        synth=tuple(args.synth),
+        test=tuple(args.test),
+        components=args.components,
+        method=args.method,
+        objects=args.objects,
+        unit_norm=not args.no_unit_norm,
+        synthesis=SynthesisOptions(
+            flow=args.flow,
+            elevation=args.elevation,
+            extent=not args.no_extent,
+            blend=args.blend,
+            silhouette=args.silhouette,
+        ),
+        kernel=args.kernel,
+        gamma=args.gamma,
+        seeds=args.seeds,
+        dense_step=args.dense_step,
+        interpolate_pose=args.pose == "interpolate",
+    )
+    if args.seeds is not None:
+        experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
+    if args.kernel and args.save:
+        raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
+    result = experiment.run(folder, progress=progress_bar(args.quiet, f"{args.method} objects", "obj"))
+    if args.seeds is None:
+        title = (
+            f"COIL {args.method}: alpha={args.alpha:g}, {experiment.views} seed views, center={args.center:g}"
+        )
+    else:
+        title = f"COIL {args.method}: full circle, {args.seeds} seed views from center={args.center:g}"
+    if args.kernel:
+        title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
+    print(format_table(result, title))
+    if args.json:
+        write_json(args.json, result.to_json())
+    if args.save:
+        meta = {"command": "coil", "alpha": args.alpha, "method": args.method, "accuracy": result.accuracy}
+        save_recognizer(args.save, result.recognizer, meta)
+    return 0
+
+
+def _device(name: str) -> torch.device:
+    import torch
+
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda needs a CUDA device, but torch.cuda.is_available() is False")
+    return torch.device(name)
+
+
+def _on_device(folder: CoilFolder, device: torch.device) -> CoilFolder:
+    """``folder`` whose images arrive on ``device``: the whole experiment then runs there
+    (seeds, warp, eigenspace, recognition) except the optical flow, which scikit-image runs
+    on the CPU (the correspondence moves the seeds there and its result back)."""
+    if device.type == "cpu":
+        return folder
+    from torch_eigview.datasets.coil import CoilFolder
+
+    class DeviceFolder(CoilFolder):
+        def images(self, obj: int, degrees_list: Sequence[float] | torch.Tensor) -> torch.Tensor:
+            return super().images(obj, degrees_list).to(device)
+
+    moved = DeviceFolder.__new__(DeviceFolder)
+    moved.__dict__.update(folder.__dict__)
+    return moved
