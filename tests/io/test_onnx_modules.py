@@ -160,3 +160,14 @@ def test_any_module_errors(tmp_path: Path) -> None:
     ):
         export_onnx(_Images(), path, image_shape=IMAGE_SHAPE)
     assert not path.exists()
+
+
+def test_opset_above_the_installed_onnx_is_refused(tmp_path: Path) -> None:
+    """An opset the exporter cannot write is an error naming it, not a graph of another opset."""
+    import onnx
+
+    newest = onnx.defs.onnx_opset_version()
+    layer = EigenProjection(torch.zeros(12), torch.eye(3, 12), image_shape=(1, 3, 4))
+    with pytest.raises(ValueError, match=rf"opset_version={newest + 1} must be <= {newest}"):
+        export_onnx(layer, tmp_path / "m.onnx", opset_version=newest + 1)
+    assert not (tmp_path / "m.onnx").exists()

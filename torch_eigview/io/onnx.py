@@ -197,18 +197,21 @@ def export_onnx(
             or ``example_input`` has the wrong type.
         ValueError: the image shape is unknown or differs between ``image_shape``,
             ``example_input`` and the module's; the module's output is not (B, k); or
-            ``opset_version`` is below 18; or ``path`` cannot be written (a directory, a
+            ``opset_version`` is below 18 or above the installed onnx's newest opset; or
+            ``path`` cannot be written (a directory, a
             special file, a missing folder).
         OSError: the write failed (disk full, file-size limit); ``path`` is unchanged.
         ImportError: onnx (or, with ``dynamo``, onnxscript) is not installed: the message
             names ``pip install 'torch_eigview[onnx]'``.
         NotFittedError: ``model`` is an estimator that was not fitted.
     """
-    require("onnx", "onnx", "ONNX export")
+    onnx = require("onnx", "onnx", "ONNX export")
     check_output_path(path, "path")
     if dynamo:
         require("onnxscript", "onnx", "ONNX export")
-    opset_version = check_int(opset_version, "opset_version", minimum=MIN_OPSET)
+    # Above the installed onnx's newest opset the exporter would write another one silently.
+    newest = onnx.defs.onnx_opset_version()
+    opset_version = check_int(opset_version, "opset_version", minimum=MIN_OPSET, maximum=newest)
     module, info, outputs, sample = _prepare(model, fold, image_shape, example_input)
     _save_graph(_Graph(module).eval(), sample, outputs, opset_version, dynamo, info.to_props(), path)
     return info
