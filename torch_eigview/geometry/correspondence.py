@@ -28,7 +28,7 @@ from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
 
 __all__ = ["Correspondence", "correspondence_from_disparity", "estimate_correspondence"]
 
-_METHODS = ("tvl1", "ilk")
+_METHODS = ("tvl1", "ilk", "rows")
 
 
 @dataclass(frozen=True)
@@ -294,8 +294,11 @@ def estimate_correspondence(
     Args:
         view1: (C, H, W) or (B, C, H, W) image of the first seed view.
         view2: same shape, the second seed view.
-        method: ``"tvl1"`` (:func:`skimage.registration.optical_flow_tvl1`) or ``"ilk"``
-            (:func:`skimage.registration.optical_flow_ilk`).
+        method: ``"tvl1"`` (:func:`skimage.registration.optical_flow_tvl1`), ``"ilk"``
+            (:func:`skimage.registration.optical_flow_ilk`) or ``"rows"`` (semi-global
+            matching along the turntable's epipolar lines in torch,
+            :func:`~torch_eigview.geometry.row_matcher.match_rows`, which needs ``alpha``
+            among ``flow_kwargs``).
         threshold: forward–backward tolerance in pixels for the validity masks.
         **flow_kwargs: passed to the scikit-image flow function.
 
@@ -309,6 +312,10 @@ def estimate_correspondence(
         raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    if method == "rows":
+        from torch_eigview.geometry.row_matcher import match_rows  # it builds on this module
+
+        return match_rows(v1, v2, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
     check_finite(v1, "view1")
     check_finite(v2, "view2")
     if v1.ndim == 3:
