@@ -53,6 +53,7 @@ SUBPACKAGES = {
         "fill_row_holes",
         "fundamental_from_tensor",
         "invert_row_map",
+        "match_rows",
         "novel_view_tensor",
         "novel_view_tensor_from_cameras",
         "orthographic_coefficients",

@@ -15,7 +15,7 @@ from torch_eigview.datasets import (
     render_views,
 )
 from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.geometry.correspondence import estimate_correspondence
+from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.synthesis import (
     PairGeometry,
     SynthesisOptions,
@@ -240,7 +240,7 @@ def test_options_defaults() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        (dict(flow="farneback"), "flow must be 'tvl1' or 'ilk', got 'farneback'"),
+        (dict(flow="farneback"), "flow must be 'tvl1', 'ilk' or 'rows', got 'farneback'"),
         (dict(elevation="up"), "elevation must be a number of degrees or 'auto', got 'up'"),
         (dict(threshold=0.0), "threshold=0.0 must be positive"),
         (dict(threshold=-1.0), "threshold=-1.0 must be positive"),

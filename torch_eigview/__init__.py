@@ -23,7 +23,8 @@ if TYPE_CHECKING:
     from torch_eigview.decomposition.kernel import KernelEigenspace
     from torch_eigview.decomposition.streaming import StreamingEigenspace
     from torch_eigview.errors import NotFittedError
-    from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
+    from torch_eigview.geometry.correspondence import Correspondence
+    from torch_eigview.geometry.flow import estimate_correspondence
     from torch_eigview.geometry.pose import affine_coefficients, estimate_elevation, orthographic_coefficients
     from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
     from torch_eigview.method.estimator import FewViewEigenspace
@@ -58,7 +59,7 @@ _SOURCES = {
     "SynthesisOptions": "synthesis",
     "SynthesizedViews": "synthesis",
     "affine_coefficients": "geometry.pose",
-    "estimate_correspondence": "geometry.correspondence",
+    "estimate_correspondence": "geometry.flow",
     "estimate_elevation": "geometry.pose",
     "load_recognizer": "io.checkpoint",
     "orthographic_coefficients": "geometry.pose",

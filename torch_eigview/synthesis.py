@@ -42,7 +42,8 @@ from torch_eigview.check import (
     check_number,
     check_positive,
 )
-from torch_eigview.geometry.correspondence import Correspondence, estimate_correspondence
+from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
 from torch_eigview.warp.base import BLENDS
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent
@@ -74,7 +75,10 @@ class SynthesisOptions:
     """How seed views become novel views.
 
     Attributes:
-        flow: scikit-image flow for the correspondences, ``"tvl1"`` or ``"ilk"``.
+        flow: the correspondences: scikit-image flow, ``"tvl1"`` or ``"ilk"``, or
+            ``"rows"``, semi-global matching along the epipolar lines
+            (:func:`~torch_eigview.geometry.row_matcher.match_rows`, given each pair's
+            α and ``center``).
         threshold: forward–backward consistency tolerance in pixels.
         elevation: camera elevation in degrees (0: the paper's orthographic camera, rows
             stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow; a
@@ -120,8 +124,8 @@ class SynthesisOptions:
         return dict(_FAST_TVL1) if self.flow == "tvl1" else {}
 
     def __post_init__(self) -> None:
-        if self.flow not in ("tvl1", "ilk"):
-            raise ValueError(f"flow must be 'tvl1' or 'ilk', got {self.flow!r}")
+        if self.flow not in ("tvl1", "ilk", "rows"):
+            raise ValueError(f"flow must be 'tvl1', 'ilk' or 'rows', got {self.flow!r}")
         if isinstance(self.elevation, str):
             if self.elevation != "auto":
                 raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
@@ -280,9 +284,10 @@ def pair_geometry(
     for n in range(seeds.shape[0] - 1):
         t0 = time.perf_counter()
         v1, v2 = seeds[n : n + 1], seeds[n + 1 : n + 2]
-        corr = estimate_correspondence(
-            v1, v2, method=opts.flow, threshold=opts.threshold, **opts.flow_kwargs()
-        )
+        kwargs = opts.flow_kwargs()
+        if opts.flow == "rows":
+            kwargs = {"alpha": steps[n], "center": opts.center, **kwargs}
+        corr = estimate_correspondence(v1, v2, method=opts.flow, threshold=opts.threshold, **kwargs)
         elevation = opts.elevation
         if elevation == "auto":
             elevation = _auto_elevation(corr, steps[n], foreground_mask(v1, opts.background), opts.center, n)

@@ -20,7 +20,8 @@ from hypothesis import strategies as st
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import parse_object_spec
 from torch_eigview.decomposition import Eigenspace, KernelEigenspace, StreamingEigenspace
-from torch_eigview.geometry.correspondence import correspondence_from_disparity, estimate_correspondence
+from torch_eigview.geometry.correspondence import correspondence_from_disparity
+from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import orthographic_coefficients
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions, pair_of, synthesize_views

@@ -10,11 +10,8 @@ import pytest
 import torch
 from scipy import ndimage
 
-from torch_eigview.geometry.correspondence import (
-    Correspondence,
-    correspondence_from_disparity,
-    estimate_correspondence,
-)
+from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
+from torch_eigview.geometry.flow import estimate_correspondence
 
 H, W = 48, 64
 
@@ -259,7 +256,7 @@ def test_estimate_errors() -> None:
         estimate_correspondence(bad, view)
     with pytest.raises(ValueError, match=r"view2 must be finite"):
         estimate_correspondence(view, bad)
-    with pytest.raises(ValueError, match=r"method must be one of \('tvl1', 'ilk'\), got 'farneback'"):
+    with pytest.raises(ValueError, match=r"method must be one of \('tvl1', 'ilk', 'rows'\), got 'farneback'"):
         estimate_correspondence(view, view, method="farneback")
     with pytest.raises(TypeError, match=r"view1 must have a floating dtype, got torch.uint8"):
         estimate_correspondence((view * 255).to(torch.uint8), view)

@@ -13,8 +13,8 @@ from torch_eigview.geometry.correspondence import (
     Correspondence,
     check_correspondence,
     correspondence_from_disparity,
-    estimate_correspondence,
 )
+from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation, orthographic_coefficients
 from torch_eigview.warp.novel_view import NovelViewWarp
 

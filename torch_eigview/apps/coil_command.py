@@ -96,7 +96,10 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
     coil.add_argument("--objects", type=objects_arg, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
     coil.add_argument(
-        "--flow", choices=("tvl1", "ilk"), default="tvl1", help="optical flow for correspondences"
+        "--flow",
+        choices=("tvl1", "ilk", "rows"),
+        default="tvl1",
+        help="correspondences: optical flow, or semi-global matching along rows (rows)",
     )
     coil.add_argument(
         "--elevation",

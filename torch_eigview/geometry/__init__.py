@@ -4,11 +4,8 @@ correspondences and the inversion of 1-D (row) maps.
 
 from __future__ import annotations
 
-from torch_eigview.geometry.correspondence import (
-    Correspondence,
-    correspondence_from_disparity,
-    estimate_correspondence,
-)
+from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
+from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import (
     AffineCoefficients,
     affine_coefficients,
@@ -17,6 +14,7 @@ from torch_eigview.geometry.pose import (
     rotation_y,
 )
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.geometry.row_matcher import match_rows
 from torch_eigview.geometry.transfer import epipoles_from_tensor, fundamental_from_tensor, transfer_points
 from torch_eigview.geometry.trifocal import (
     novel_view_tensor,
@@ -38,6 +36,7 @@ __all__ = [
     "fill_row_holes",
     "fundamental_from_tensor",
     "invert_row_map",
+    "match_rows",
     "novel_view_tensor",
     "novel_view_tensor_from_cameras",
     "orthographic_coefficients",

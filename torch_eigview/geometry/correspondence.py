@@ -18,9 +18,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 import torch
-from skimage.registration import optical_flow_ilk, optical_flow_tvl1
 from torch.utils.data._utils.collate import default_collate_fn_map
 
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
@@ -30,10 +28,7 @@ __all__ = [
     "Correspondence",
     "check_correspondence",
     "correspondence_from_disparity",
-    "estimate_correspondence",
 ]
-
-_METHODS = ("tvl1", "ilk")
 
 
 @dataclass(frozen=True)
@@ -320,90 +315,3 @@ def _invert_disparity(d12: torch.Tensor) -> torch.Tensor:
     src, hit = invert_row_map(x2, ok, None)
     src = fill_row_holes(src, hit, cols.expand_as(src))
     return src[:, 0] - cols
-
-
-def _to_gray_numpy(view: torch.Tensor) -> np.ndarray:
-    return view.detach().to("cpu", torch.float64).mean(dim=0).numpy()
-
-
-def estimate_correspondence(
-    view1: torch.Tensor,
-    view2: torch.Tensor,
-    *,
-    method: str = "tvl1",
-    threshold: float = 1.0,
-    **flow_kwargs: object,
-) -> Correspondence:
-    """Dense correspondences with scikit-image optical flow and a consistency mask.
-
-    The flow is estimated in both directions (view 1 → 2 and 2 → 1) on the grayscale
-    images; only its horizontal component is kept, as the orthographic rotation about
-    the vertical axis moves points along rows.
-
-    Args:
-        view1: (C, H, W) or (B, C, H, W) image of the first seed view.
-        view2: same shape, the second seed view.
-        method: ``"tvl1"`` (:func:`skimage.registration.optical_flow_tvl1`) or ``"ilk"``
-            (:func:`skimage.registration.optical_flow_ilk`).
-        threshold: forward–backward tolerance in pixels for the validity masks.
-        **flow_kwargs: passed to the scikit-image flow function.
-
-    Returns:
-        A :class:`Correspondence` of shape (B, H, W) on the device and dtype of ``view1``;
-        B = 0 gives an empty one.
-
-    Raises:
-        TypeError: a view is not a float tensor, or ``method`` not a str.
-        ValueError: shapes that differ or are smaller than 2x2 pixels, non-finite views,
-            an unknown ``method``, a ``threshold`` that is not a finite number > 0, or a
-            flow that diverges (views far outside image intensities).
-    """
-    v1 = check_float_tensor(view1, "view1")
-    v2 = check_float_tensor(view2, "view2")
-    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
-    if v2.shape != v1.shape:
-        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
-    if method not in _METHODS:
-        raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
-    threshold = check_positive(threshold, "threshold")
-    if v1.shape[-3] < 1:
-        raise ValueError(f"view1 must have at least one channel, got shape {tuple(v1.shape)}")
-    if v1.shape[-2] < 2 or v1.shape[-1] < 2:
-        raise ValueError(
-            f"view1 must be at least 2x2 pixels (the flow takes image gradients), got H={v1.shape[-2]}, "
-            f"W={v1.shape[-1]}"
-        )
-    check_finite(v1, "view1")
-    check_finite(v2, "view2")
-    if v1.ndim == 3:
-        v1, v2 = v1[None], v2[None]
-    if v1.shape[0] == 0:  # an empty batch of pairs has an empty correspondence
-        empty = v1.new_zeros(0, *v1.shape[-2:])
-        mask = torch.zeros(empty.shape, dtype=torch.bool, device=v1.device)
-        return Correspondence(empty, empty.clone(), mask, mask.clone(), empty.clone(), empty.clone())
-    flow = optical_flow_tvl1 if method == "tvl1" else optical_flow_ilk
-    d12, d21, v12, v21 = [], [], [], []
-    # A diverging flow is reported below with its cause, not as numpy's RuntimeWarnings.
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        for a, b in zip(v1, v2, strict=True):
-            ga, gb = _to_gray_numpy(a), _to_gray_numpy(b)
-            # skimage: moving(r + v, c + u) ~ reference(r, c), so u maps reference to moving.
-            fwd = flow(ga, gb, **flow_kwargs)
-            d12.append(fwd[1])
-            v12.append(fwd[0])
-            bwd = flow(gb, ga, **flow_kwargs)
-            d21.append(bwd[1])
-            v21.append(bwd[0])
-
-    def tensor(arrays: list[np.ndarray]) -> torch.Tensor:
-        return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)
-
-    if not all(np.isfinite(f).all() for f in (*d12, *d21, *v12, *v21)):
-        largest = max(float(v1.abs().max()), float(v2.abs().max()))
-        raise ValueError(
-            f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
-            f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
-        )
-
-    corr = correspondence_from_disparity(tensor(d12), tensor(d21), threshold=threshold)
-    return dataclasses.replace(corr, vertical_12=tensor(v12), vertical_21=tensor(v21))

@@ -232,7 +232,7 @@ def estimate_elevation(
 
     Args:
         correspondence: (B, H, W) correspondences with ``vertical_12`` (a 2D flow, as
-            :func:`~torch_eigview.geometry.correspondence.estimate_correspondence` returns).
+            :func:`~torch_eigview.geometry.flow.estimate_correspondence` returns).
         alpha: angle of the second seed view in degrees.
         center: column of the rotation axis; default ``(W - 1) / 2``.
         mask: optional (B, H, W) bool, pixels to use (e.g. the object's foreground).

@@ -124,7 +124,7 @@ class PerspectiveWarp(ViewWarp):
         blend: ``"linear"`` or ``"nearest"``, as :class:`~torch_eigview.warp.novel_view.NovelViewWarp`'s.
 
     The correspondences must be 2D: ``vertical_12`` and ``vertical_21`` set (as
-    :func:`~torch_eigview.geometry.correspondence.estimate_correspondence` returns, or
+    :func:`~torch_eigview.geometry.flow.estimate_correspondence` returns, or
     :func:`~torch_eigview.datasets.correspondence.exact_correspondence_2d`).
     """
 

@@ -1,0 +1,351 @@
+"""Semi-global matching along the epipolar lines of a turntable camera, in torch.
+
+Convention: images are (B, C, H, W); x is the column, y the row, pixel centres at
+integers; the rotation axis is the column ``center``. A pixel of view 1 at
+``X = x1 - center`` with depth Z (pixels, towards the camera at the second view's
+side) lands in view 2, α degrees further round, at (Sec. 3 of the paper, with the
+tilted camera of :func:`~torch_eigview.geometry.pose.estimate_elevation`)::
+
+    x2 - x1 = X (cos α - 1) + k,               k = Z sin α,
+    y2 - y1 = sin(elevation) (X sin α + k tan(α / 2)),
+
+both then scaled by ``1 + scale`` about the image centre and shifted vertically by
+``shift`` where the data set size-normalizes each image.
+
+So a pixel's candidate matches form a one-parameter family, its epipolar line: nearly
+horizontal, shifted vertically in proportion to X. The matcher labels each pixel with
+the integer k in ``[-K, K]``, ``K = ceil(depth |sin α|)``: its depth, not its disparity,
+so equal labels of neighbours mean equal depth, which is what SGM's smoothness favours.
+Per label it samples the other view (bilinear) at the epipolar point, takes a patch
+cost, aggregates it along four paths with SGM's P1/P2 penalties, picks the best label
+with a parabola for sub-pixel depth, and does all this in both directions at once
+(view 2 is view 1 turned by −α). The left–right check of
+:func:`~torch_eigview.geometry.correspondence.correspondence_from_disparity` marks
+pixels whose two matches disagree (occluded in the other view, or ambiguous) invalid.
+
+Where each line lies vertically (the elevation, unless given, and the rescaling and
+shift of a data set that size-normalizes every image) is fitted once per pair from a
+coarse 2-D search (:func:`_line_model`); the dense matching is then one-dimensional.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import torch
+import torch.nn.functional as F
+
+from torch_eigview.check import (
+    check_alpha,
+    check_choice,
+    check_finite,
+    check_float_tensor,
+    check_int,
+    check_ndim,
+    check_number,
+)
+from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
+
+__all__ = ["COSTS", "match_rows"]
+
+COSTS = ("adgrad", "zncc")
+
+# Most elements of one batched grid_sample call (bounds memory for many labels).
+_CHUNK = 1 << 24
+
+
+def _features(gray: torch.Tensor, cost: str) -> torch.Tensor:
+    """(N, F, H, W) per-pixel features sampled along the epipolar line."""
+    if cost == "zncc":
+        return gray[:, None]
+    gx = F.pad(gray[:, None], (1, 1, 0, 0), mode="replicate").diff(dim=-1)
+    gy = F.pad(gray[:, None], (0, 0, 1, 1), mode="replicate").diff(dim=-2)
+    # Central differences: mean of the two one-sided ones.
+    gx = 0.5 * (gx[..., 1:] + gx[..., :-1])
+    gy = 0.5 * (gy[..., 1:, :] + gy[..., :-1, :])
+    return torch.cat([gray[:, None], gx, gy], dim=1)
+
+
+def _box(x: torch.Tensor, patch: int) -> torch.Tensor:
+    """Mean over a ``patch`` x ``patch`` window of each (.., H, W) image, edges replicated."""
+    shape = x.shape
+    flat = x.reshape(-1, 1, *shape[-2:])
+    r = patch // 2
+    flat = F.pad(flat, (r, r, r, r), mode="replicate")
+    # Separable: a row mean then a column mean, 2·patch additions per pixel, not patch².
+    flat = F.avg_pool2d(F.avg_pool2d(flat, (1, patch), stride=1), (patch, 1), stride=1)
+    return flat.reshape(shape)
+
+
+def _epipolar_grid(
+    n_labels: int, h: int, w: int, angles: torch.Tensor, model: torch.Tensor, center: float
+) -> torch.Tensor:
+    """(N, L, H, W, 2) normalized (x, y) in the other view of every pixel and label k.
+
+    Args:
+        angles: (N,) α in radians of each pair (−α for the reverse direction).
+        model: (N, 3) the line model (tilt, scale, shift) of :func:`_line_model`.
+    """
+    dev, dt = angles.device, angles.dtype
+    k = (torch.arange(n_labels, device=dev, dtype=dt) - (n_labels - 1) // 2)[None, :, None, None]
+    big_x = torch.arange(w, device=dev, dtype=dt) - center
+    big_y = torch.arange(h, device=dev, dtype=dt)[:, None] - (h - 1) / 2
+    a = angles[:, None, None, None]
+    tilt, scale, shift = (m[:, None, None, None] for m in model.unbind(1))
+    x2 = center + (1 + scale) * (big_x * torch.cos(a) + k)
+    y2 = (h - 1) / 2 + (1 + scale) * (big_y + tilt * (big_x * torch.sin(a) + k * torch.tan(a / 2))) + shift
+    x2 = x2.expand(-1, -1, h, -1)
+    # align_corners=True: -1 and 1 are the centres of the first and last pixels.
+    return torch.stack([2 * x2 / max(w - 1, 1) - 1, 2 * y2 / max(h - 1, 1) - 1], dim=-1)
+
+
+def _cost_volume(
+    ref: torch.Tensor, other: torch.Tensor, grid: torch.Tensor, cost: str, patch: int
+) -> torch.Tensor:
+    """(N, L, H, W) patch cost of matching each ``ref`` pixel to ``other`` at ``grid``."""
+    n, f, h, w = ref.shape
+    n_labels = grid.shape[1]
+    per_label = max(1, _CHUNK // max(1, n * f * h * w))
+    out = []
+    for start in range(0, n_labels, per_label):
+        g = grid[:, start : start + per_label]
+        m = g.shape[1]
+        warped = F.grid_sample(
+            # Outside the other view is black, as a turntable image's background: a match
+            # there costs what matching the background costs, and the left–right check
+            # rejects it.
+            other,
+            g.reshape(n, m * h, w, 2),
+            mode="bilinear",
+            padding_mode="zeros",
+            align_corners=True,
+        ).reshape(n, f, m, h, w)
+        out.append(_patch_cost(ref, warped, cost, patch))
+    return torch.cat(out, dim=1)
+
+
+def _patch_cost(ref: torch.Tensor, warped: torch.Tensor, cost: str, patch: int) -> torch.Tensor:
+    """(N, m, H, W) cost of ``ref`` (N, F, H, W) against ``warped`` (N, F, m, H, W)."""
+    if cost == "adgrad":
+        diff = (ref[:, :, None] - warped).abs()
+        # Truncated so that a few outliers (occlusions, highlights) do not dominate a patch.
+        return _box(diff[:, 0].clamp(max=0.2) + diff[:, 1:].sum(dim=1).clamp(max=0.2), patch)
+    a, b = ref[:, 0, None].expand_as(warped[:, 0]), warped[:, 0]
+    ma, mb = _box(a, patch), _box(b, patch)
+    va = (_box(a * a, patch) - ma * ma).clamp_min(0)
+    vb = (_box(b * b, patch) - mb * mb).clamp_min(0)
+    cov = _box(a * b, patch) - ma * mb
+    # The variance floor makes flat patches (the background) cost 1 at every label: no
+    # preference, so SGM fills them from their textured neighbours.
+    eps = 1e-4
+    return 1 - cov / torch.sqrt((va + eps) * (vb + eps))
+
+
+def _aggregate(cost: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
+    """SGM: (N, L, H, W) costs summed over the four row and column paths."""
+    total = torch.zeros_like(cost)
+    for dim in (-1, -2):
+        for reverse in (False, True):
+            total += _path(cost, dim, reverse, p1, p2)
+    return total
+
+
+def _path(cost: torch.Tensor, dim: int, reverse: bool, p1: float, p2: float) -> torch.Tensor:
+    """One SGM path: L_r(p, k) = C(p, k) + min(L_r(p − r, k), L_r(p − r, k ± 1) + P1,
+    min_j L_r(p − r, j) + P2) − min_j L_r(p − r, j)."""
+    c = cost.movedim(dim, 0)
+    if reverse:
+        c = c.flip(0)
+    out = torch.empty_like(c)
+    prev = out[0] = c[0]
+    inf = torch.full_like(prev[:, :1], float("inf"))
+    for t in range(1, c.shape[0]):
+        low = prev.amin(dim=1, keepdim=True)
+        step = torch.minimum(torch.cat([prev[:, 1:], inf], 1), torch.cat([inf, prev[:, :-1]], 1))
+        best = torch.minimum(torch.minimum(prev, step + p1), low + p2)
+        prev = out[t] = c[t] + best - low
+    if reverse:
+        out = out.flip(0)
+    return out.movedim(0, dim)
+
+
+def _winner(volume: torch.Tensor) -> torch.Tensor:
+    """(N, H, W) sub-pixel label (centred: 0 is the middle label) of least cost."""
+    n_labels = volume.shape[1]
+    k = volume.argmin(dim=1, keepdim=True)
+    c0 = volume.gather(1, k)
+    cm = volume.gather(1, (k - 1).clamp(min=0))
+    cp = volume.gather(1, (k + 1).clamp(max=n_labels - 1))
+    curv = cm - 2 * c0 + cp
+    inner = (k > 0) & (k < n_labels - 1) & (curv > 0)
+    delta = torch.where(inner, (cm - cp) / (2 * curv).clamp_min(1e-12), torch.zeros_like(c0))
+    return (k + delta.clamp(-0.5, 0.5) - (n_labels - 1) // 2)[:, 0].to(volume.dtype)
+
+
+def _line_model(
+    ref: torch.Tensor,
+    other: torch.Tensor,
+    angles: torch.Tensor,
+    depth: float,
+    center: float,
+    tilt: float | None,
+) -> torch.Tensor:
+    """(N, 3) per direction the vertical line model (tilt, scale, shift) by coarse 2-D matching.
+
+    A turntable view's rows move by ``tilt (X sin α + k tan(α/2))``; a data set that
+    size-normalizes each image (COIL's processed images) also rescales and shifts them,
+    ``scale (y − c_y) + shift``. At quarter resolution every (label, vertical offset) is
+    tried, each pixel keeps its best, and the three (two with a given ``tilt``) are
+    fitted to the offsets of the textured pixels by iteratively reweighted (Cauchy)
+    least squares.
+    """
+    f = 4
+    n, _, h, w = ref.shape
+    small = F.avg_pool2d(torch.cat([ref, other]), f)
+    r, o = small.chunk(2)
+    hs, ws = small.shape[-2:]
+    cs = (center + 0.5) / f - 0.5
+    sin_a = angles.abs().sin().max().item()
+    n_labels = 2 * math.ceil((depth * sin_a + 0.2 * w / 2) / f) + 1
+    reach = math.ceil((0.5 * (w / 2) * (sin_a + 1 - math.cos(math.asin(sin_a))) + 0.2 * h / 2) / f)
+    shift = torch.zeros(n, 3, device=ref.device, dtype=ref.dtype)
+    cost = torch.full((n, hs, ws), float("inf"), device=ref.device, dtype=ref.dtype)
+    label, dy = torch.zeros_like(cost), torch.zeros_like(cost)
+    for v in range(-reach, reach + 1):
+        shift[:, 2] = v
+        grid = _epipolar_grid(n_labels, hs, ws, angles, shift, cs)
+        c_v, l_v = _cost_volume(r, o, grid, "adgrad", 3).min(dim=1)
+        better = c_v < cost
+        cost = torch.where(better, c_v, cost)
+        label = torch.where(better, l_v.to(cost.dtype), label)
+        dy = torch.where(better, torch.full_like(cost, v), dy)
+    k = label - (n_labels - 1) // 2
+    big_x = torch.arange(ws, device=ref.device, dtype=ref.dtype) - cs
+    big_y = (torch.arange(hs, device=ref.device, dtype=ref.dtype)[:, None] - (hs - 1) / 2).expand(hs, ws)
+    a = angles[:, None, None]
+    basis = [big_x * torch.sin(a) + k * torch.tan(a / 2), big_y.expand_as(k), torch.ones_like(k)]
+    target = dy
+    if tilt is not None:
+        target = dy - tilt * basis[0]
+        basis = basis[1:]
+    textured = r[:, 1:].abs().sum(dim=1) > 0.01
+    design = torch.stack(basis, dim=-1).reshape(n, -1, len(basis))
+    y = target.reshape(n, -1, 1)
+    weight = textured.reshape(n, -1, 1).to(ref.dtype)
+    for _ in range(6):
+        sw = weight.sqrt()
+        sol = torch.linalg.lstsq(design * sw, y * sw).solution
+        res = (design @ sol - y).abs()
+        weight = textured.reshape(n, -1, 1).to(ref.dtype) / (1 + res.square())
+    sol = sol[..., 0]
+    if tilt is not None:
+        sol = torch.cat([torch.full_like(sol[:, :1], tilt), sol], dim=1)
+    return sol * torch.tensor([1.0, 1.0, f], device=sol.device, dtype=sol.dtype)
+
+
+def _check_views(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tensor]:
+    """The two views as finite float (B, C, H, W) tensors of one shape."""
+    v1 = check_float_tensor(view1, "view1")
+    v2 = check_float_tensor(view2, "view2")
+    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
+    if v2.shape != v1.shape:
+        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
+    check_finite(v1, "view1")
+    check_finite(v2, "view2")
+    return (v1[None], v2[None]) if v1.ndim == 3 else (v1, v2)
+
+
+def _tilt(elevation: object) -> float | None:
+    """The sine of a given elevation in degrees, or None for ``"auto"``."""
+    if isinstance(elevation, str):
+        if elevation != "auto":
+            raise ValueError(f"elevation must be a number of degrees or 'auto', got {elevation!r}")
+        return None
+    return math.sin(math.radians(check_number(elevation, "elevation")))
+
+
+def _matches(
+    k: torch.Tensor, model: torch.Tensor, angles: torch.Tensor, center: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Disparity ``x2 − x1`` and vertical flow ``y2 − y1`` (N, H, W) of labels ``k`` (N, H, W)."""
+    _, h, w = k.shape
+    big_x = torch.arange(w, device=k.device, dtype=k.dtype) - center
+    big_y = torch.arange(h, device=k.device, dtype=k.dtype)[:, None] - (h - 1) / 2
+    a = angles[:, None, None]
+    tilt, scale, shift = (m[:, None, None] for m in model.unbind(1))
+    disparity = (1 + scale) * (big_x * torch.cos(a) + k) - big_x
+    vertical = (1 + scale) * (big_y + tilt * (big_x * torch.sin(a) + k * torch.tan(a / 2))) + shift - big_y
+    return disparity, vertical
+
+
+def match_rows(
+    view1: torch.Tensor,
+    view2: torch.Tensor,
+    alpha: float,
+    *,
+    center: float | None = None,
+    elevation: float | str = "auto",
+    depth: float | None = None,
+    cost: str = "adgrad",
+    patch: int = 5,
+    p1: float = 0.01,
+    p2: float = 0.1,
+    threshold: float = 1.0,
+) -> Correspondence:
+    """Dense correspondences of two turntable views by semi-global matching along rows.
+
+    Args:
+        view1: (C, H, W) or (B, C, H, W) first seed view (channels averaged to gray).
+        view2: same shape, the view turned by ``alpha``.
+        alpha: angle from view 1 to view 2 in degrees (not a multiple of 180).
+        center: column of the rotation axis, default ``(W - 1) / 2``.
+        elevation: camera elevation in degrees, or ``"auto"`` to find it by matching.
+        depth: largest ``|Z|`` in pixels searched, default ``W / 2``; with α it sets the
+            label range ``K = ceil(depth |sin α|)``.
+        cost: ``"adgrad"`` (truncated absolute difference of intensity and gradient,
+            averaged over the patch) or ``"zncc"`` (1 − zero-mean normalized
+            cross-correlation of the patch).
+        patch: odd side of the cost's square patch.
+        p1: SGM penalty for a one-label change between neighbours.
+        p2: SGM penalty for a larger change (a depth discontinuity).
+        threshold: left–right tolerance in pixels for the validity masks.
+
+    Returns:
+        A :class:`~torch_eigview.geometry.correspondence.Correspondence` (B, H, W) on
+        the device and dtype of ``view1``, with the vertical components of the
+        epipolar matches in ``vertical_12`` and ``vertical_21``.
+
+    Example:
+        >>> tex = torch.rand(1, 1, 24, 32, generator=torch.Generator().manual_seed(0))
+        >>> corr = match_rows(tex, tex, 10.0, elevation=0.0, depth=8.0)
+        >>> corr.shape, corr.disparity_12.abs().max().item() < 4
+        ((1, 24, 32), True)
+    """
+    v1, v2 = _check_views(view1, view2)
+    alpha = check_alpha(alpha)
+    cost = check_choice(cost, "cost", COSTS)
+    patch = check_int(patch, "patch", minimum=1)
+    if patch % 2 == 0:
+        raise ValueError(f"patch={patch} must be odd")
+    for name, value in (("p1", p1), ("p2", p2), ("threshold", threshold), ("depth", depth or 1.0)):
+        if not check_number(value, name) > 0:
+            raise ValueError(f"{name}={value} must be positive")
+    b, _, h, w = v1.shape
+    c = (w - 1) / 2 if center is None else check_number(center, "center")
+    reach = w / 2 if depth is None else float(depth)
+    tilt = _tilt(elevation)
+    # Float32 throughout: the costs need no more, and it is what a GPU runs fast.
+    gray = torch.cat([v1, v2]).mean(dim=1).float()
+    feats = _features(gray, "adgrad")
+    ref = feats if cost == "adgrad" else _features(gray, cost)
+    rad = math.radians(alpha)
+    angles = torch.tensor([rad] * b + [-rad] * b, device=gray.device)
+    model = _line_model(feats, torch.cat([feats[b:], feats[:b]]), angles, reach, c, tilt)
+    n_labels = 2 * math.ceil(reach * abs(math.sin(rad))) + 1
+    grid = _epipolar_grid(n_labels, h, w, angles, model, c)
+    volume = _cost_volume(ref, torch.cat([ref[b:], ref[:b]]), grid, cost, patch)
+    disparity, vertical = _matches(_winner(_aggregate(volume, p1, p2)), model, angles, c)
+    disparity, vertical = disparity.to(v1.dtype), vertical.to(v1.dtype)
+    corr = correspondence_from_disparity(disparity[:b], disparity[b:], threshold=threshold)
+    return dataclasses.replace(corr, vertical_12=vertical[:b], vertical_21=vertical[b:])
