@@ -1,4 +1,4 @@
-"""Datasets: COIL folders, the synthetic objects, their cameras and renderer, exact correspondences."""
+"""Datasets: view manifests and their Dataset, COIL folders, the synthetic objects, their cameras and renderer, exact correspondences."""
 
 from __future__ import annotations
 
@@ -23,6 +23,8 @@ from torch_eigview.datasets.correspondence import (
     seen_error,
     view_correspondence,
 )
+from torch_eigview.datasets.image_views import ViewDataset
+from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
 from torch_eigview.datasets.renderer import Render, render, render_views
 from torch_eigview.datasets.shapes import SHAPES, SyntheticObject, make_object
 
@@ -37,6 +39,9 @@ __all__ = [
     "Render",
     "SyntheticObject",
     "ViewCorrespondence",
+    "ViewDataset",
+    "ViewEntry",
+    "ViewManifest",
     "default_data_root",
     "exact_correspondence",
     "exact_correspondence_2d",

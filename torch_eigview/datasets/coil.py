@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from torch_eigview.check import as_angle_tensor, check_choice, check_limit
+from torch_eigview.check import as_angle_tensor, check_choice, check_limit, check_number
 from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
 
 __all__ = ["DATA_ENV", "CoilFolder", "default_data_root", "find_coil_root", "parse_object_spec"]
@@ -247,6 +247,10 @@ class CoilFolder:
     def poses(self, obj: int) -> list[float]:
         """The available pose angles of object ``obj`` in degrees, sorted, in ``[0, 360)``."""
         return sorted(self._views(obj))
+
+    def path(self, obj: int, degrees: float) -> Path:
+        """The file of object ``obj``'s view at ``degrees`` (a pose of :meth:`poses`, to 1e-6 degrees)."""
+        return self._find(obj, float(check_number(degrees, "degrees")))
 
     def image(self, obj: int, degrees: float) -> torch.Tensor:
         """Returns the view of object ``obj`` at ``degrees`` (taken modulo 360).

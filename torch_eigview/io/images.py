@@ -69,10 +69,11 @@ def _n_frames(path: str | os.PathLike[str]) -> int:
         return 1
 
 
-def read_image(path: str | os.PathLike[str]) -> np.ndarray:
+def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False) -> np.ndarray:
     """Reads one file as a checked ``(C, H, W)`` array of its own dtype (alpha dropped).
 
-    The path is checked to be a regular file before it is opened
+    With ``keep_alpha=True`` an alpha channel is kept as the last channel (gray+alpha gives
+    ``C = 2``, RGBA ``C = 4``), for callers that use it as the foreground mask. The path is checked to be a regular file before it is opened
     (:func:`check_regular_file`); a multi-page TIFF or an animated image is refused rather
     than read as its first page, and float pixels must lie in ``[0, 1]``.
 
@@ -92,7 +93,7 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         arr = arr[None]
     elif arr.ndim == 3 and arr.shape[-1] in (1, 2, 3, 4):
         # Channels 2 and 4 are alpha (gray+alpha, RGBA): dropped.
-        keep = {1: 1, 2: 1, 3: 3, 4: 3}[arr.shape[-1]]
+        keep = arr.shape[-1] if keep_alpha else {1: 1, 2: 1, 3: 3, 4: 3}[arr.shape[-1]]
         arr = np.ascontiguousarray(np.moveaxis(arr[..., :keep], -1, 0))
     else:
         raise ValueError(f"image {path} must be (H, W) or (H, W, 1..4), got shape {arr.shape}")

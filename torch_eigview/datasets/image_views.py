@@ -1,0 +1,148 @@
+"""A torch Dataset over a :class:`~torch_eigview.datasets.manifest.ViewManifest`: images, masks and angles.
+
+Pixels are read with :func:`~torch_eigview.io.images.read_image` and converted with
+:func:`~torch_eigview.io.images.to_unit_float`, as :class:`~torch_eigview.datasets.coil.CoilFolder`
+and ``eigview predict`` do, so a COIL view is the same tensor whichever way it is read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch.utils.data import Dataset
+
+from torch_eigview.check import check_int
+from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
+from torch_eigview.io.images import read_image, to_unit_float
+
+__all__ = ["ViewDataset"]
+
+# ITU-R BT.709 luma, the weights of skimage.color.rgb2gray.
+_LUMA = (0.2125, 0.7154, 0.0721)
+
+
+def _check_size(size: object) -> tuple[int, int] | None:
+    if size is None:
+        return None
+    if not isinstance(size, Sequence) or isinstance(size, str) or len(size) != 2:
+        raise TypeError(f"size must be None or a pair (H, W) of ints, got {size!r}")
+    return check_int(size[0], "size[0] (H)", minimum=1), check_int(size[1], "size[1] (W)", minimum=1)
+
+
+def _resize(
+    image: torch.Tensor, mask: torch.Tensor, size: tuple[int, int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Resamples ``image`` ``(C, H, W)`` and ``mask`` ``(1, H, W)`` bool to ``size``.
+
+    The image is resampled antialiased-bilinear (each output pixel averages over its
+    footprint when shrinking, so no detail aliases). The mask is area-averaged into the
+    fraction of object under each output pixel (a nearest-neighbour copy when enlarging)
+    and thresholded at one half, which keeps its area unbiased where nearest-neighbour
+    sampling would drop or keep thin parts at random.
+    """
+    if tuple(image.shape[-2:]) == size:
+        return image, mask
+    work = image.double() if image.dtype == torch.float64 else image.float()
+    out = F.interpolate(work[None], size=size, mode="bilinear", antialias=True, align_corners=False)[0]
+    frac = F.interpolate(mask[None].float(), size=size, mode="bilinear", antialias=True, align_corners=False)[
+        0
+    ]
+    return out.clamp(0.0, 1.0).to(image.dtype), frac >= 0.5
+
+
+class ViewDataset(Dataset[dict[str, Any]]):
+    """The views of a manifest as dicts of tensors, read lazily (fit for a ``DataLoader``).
+
+    Each item holds ``image`` ``(C, H, W)`` of ``dtype`` in ``[0, 1]``, ``mask``
+    ``(1, H, W)`` bool (True on the object), ``object`` (str), ``azimuth`` (float, degrees
+    in ``[0, 360)``) and ``elevation`` (float, degrees, ``nan`` when not given). The mask
+    is the manifest's mask image (non-zero is object), else the image's alpha channel
+    (non-zero is object), else all True. Gray images give ``C = 1``, RGB ``C = 3``
+    unless ``channels`` converts them.
+
+    Args:
+        manifest: The views.
+        size: ``(H, W)`` every image and mask is resized to, or None to keep each file's
+            size (then a ``DataLoader`` batch needs files of one size).
+        channels: ``1`` (RGB to gray with the BT.709 weights), ``3`` (gray repeated) or
+            None to keep each file's channels.
+        dtype: Floating dtype of the images.
+
+    Raises:
+        TypeError: A wrong type of argument.
+        ValueError: ``size`` or ``channels`` is out of range. Reading an item raises
+            ValueError naming the manifest line and the file when the image or mask cannot
+            be read or the mask's size differs from the image's.
+    """
+
+    def __init__(
+        self,
+        manifest: ViewManifest,
+        size: Sequence[int] | None = None,
+        *,
+        channels: int | None = None,
+        dtype: torch.dtype = torch.float32,
+    ) -> None:
+        if not isinstance(manifest, ViewManifest):
+            raise TypeError(f"manifest must be a ViewManifest, got {type(manifest).__name__}")
+        if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
+            raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
+        if channels is not None and check_int(channels, "channels") not in (1, 3):
+            raise ValueError(f"channels must be 1, 3 or None, got {channels}")
+        self.manifest = manifest
+        self.size = _check_size(size)
+        self.channels = channels
+        self.dtype = dtype
+
+    def __len__(self) -> int:
+        return len(self.manifest)
+
+    def __repr__(self) -> str:
+        return (
+            f"ViewDataset({self.manifest!r}, size={self.size}, channels={self.channels}, dtype={self.dtype})"
+        )
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        entry = self.manifest[index]
+        image, mask = self._read(entry)
+        if self.size is not None:
+            image, mask = _resize(image, mask, self.size)
+        return {
+            "image": image,
+            "mask": mask,
+            "object": entry.object,
+            "azimuth": float(entry.azimuth),
+            "elevation": float(entry.elevation),
+        }
+
+    def _read(self, entry: ViewEntry) -> tuple[torch.Tensor, torch.Tensor]:
+        """The image ``(C, H, W)`` and mask ``(1, H, W)`` bool of ``entry``, at the file's size."""
+        try:
+            arr = read_image(entry.path, keep_alpha=True)
+            alpha = arr[-1:] if arr.shape[0] in (2, 4) else None
+            colour = arr[:-1] if alpha is not None else arr
+            if entry.mask is not None:
+                mask = read_image(entry.mask).any(axis=0, keepdims=True)
+                if mask.shape[1:] != colour.shape[1:]:
+                    raise ValueError(
+                        f"mask {entry.mask} has size (H, W)={mask.shape[1:]}, its image {entry.path} "
+                        f"{colour.shape[1:]}: they must match"
+                    )
+            elif alpha is not None:
+                mask = alpha > 0
+            else:
+                mask = np.ones((1, *colour.shape[1:]), dtype=bool)
+        except ValueError as exc:
+            raise ValueError(f"{entry.source}: {exc}") from None
+        work = np.float64 if self.dtype == torch.float64 else np.float32
+        image = torch.from_numpy(to_unit_float(colour, work)).to(self.dtype)
+        if self.channels == 3 and image.shape[0] == 1:
+            image = image.expand(3, -1, -1).clone()
+        elif self.channels == 1 and image.shape[0] == 3:
+            weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
+            image = (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
+        return image, torch.from_numpy(np.ascontiguousarray(mask))

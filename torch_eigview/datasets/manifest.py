@@ -1,0 +1,303 @@
+"""View manifests: which image shows which object at which angles, from a CSV file, a folder pattern or COIL.
+
+A manifest is a CSV file with a header and the columns ``path,object,azimuth`` (degrees),
+optionally ``elevation`` (degrees) and ``mask`` (a mask image, non-zero is object); other
+columns are ignored. Relative paths resolve against the manifest's folder. For example::
+
+    path,object,azimuth,mask
+    cup/000.png,cup,0,cup/000-mask.png
+    cup/010.png,cup,10,cup/010-mask.png
+
+A folder pattern such as ``"{object}/{object}-{elevation}-{azimuth}.png"`` takes the place of
+a manifest: the fields are parsed from the paths of the files under a root folder. Every
+file is checked when the manifest is made; the pixels are read by
+:class:`~torch_eigview.datasets.image_views.ViewDataset`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.io.images import check_regular_file
+
+__all__ = ["ViewEntry", "ViewManifest"]
+
+_REQUIRED = ("path", "object", "azimuth")
+_FIELDS = ("object", "azimuth", "elevation")
+_NUMBER = r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
+_FIELD_RE = re.compile(r"\{([^{}]*)\}")
+
+
+@dataclass(frozen=True)
+class ViewEntry:
+    """One view of a manifest.
+
+    Attributes:
+        path: The image file.
+        object: The object's name.
+        azimuth: Turntable angle in degrees, in ``[0, 360)`` (the given angle modulo 360).
+        elevation: Camera elevation in degrees, ``nan`` when the manifest has none.
+        mask: The mask image (non-zero is object), or None.
+        source: Where the view was listed, for error messages: ``"views.csv line 7"`` or
+            the image path for a folder pattern.
+    """
+
+    path: Path
+    object: str
+    azimuth: float
+    elevation: float
+    mask: Path | None
+    source: str
+
+
+def _angle(text: str, column: str, where: str, lo: float | None = None, hi: float | None = None) -> float:
+    """A finite angle in degrees parsed from ``text``; a ValueError naming ``where`` otherwise."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{where}: {column}={text!r} must be a number of degrees") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{where}: {column}={text!r} must be a finite number of degrees")
+    if lo is not None and hi is not None and not lo <= value <= hi:
+        raise ValueError(f"{where}: {column}={text!r} must lie in [{lo:g}, {hi:g}] degrees")
+    return value
+
+
+def _entry(
+    path: Path, obj: str, azimuth: str, elevation: str | None, mask: Path | None, where: str
+) -> ViewEntry:
+    """A checked entry: the files exist and are regular, the object is named, the angles are numbers."""
+    if not obj.strip():
+        raise ValueError(f"{where}: object must be a non-empty name, got {obj!r}")
+    az = _angle(azimuth, "azimuth", where) % 360.0
+    el = (
+        math.nan
+        if elevation is None or elevation.strip() == ""
+        else _angle(elevation, "elevation", where, -90, 90)
+    )
+    for what, file in (("image", path), ("mask", mask)):
+        if file is not None:
+            try:
+                check_regular_file(file, what)
+            except ValueError as exc:
+                raise ValueError(f"{where}: {exc}") from None
+    return ViewEntry(path=path, object=obj.strip(), azimuth=az, elevation=el, mask=mask, source=where)
+
+
+def _csv_entries(manifest: Path) -> list[ViewEntry]:
+    """The entries of a CSV manifest, each checked; errors name the file and the line."""
+    base = manifest.parent
+    try:
+        handle = manifest.open(newline="", encoding="utf-8-sig")  # utf-8-sig: spreadsheets write a BOM
+    except OSError as exc:
+        raise ValueError(f"manifest {manifest} cannot be read: {exc.strerror or exc}") from None
+    with handle:
+        reader = csv.reader(handle)
+        header = [h.strip() for h in next(reader, [])]
+        missing = [c for c in _REQUIRED if c not in header]
+        if missing:
+            raise ValueError(
+                f"{manifest} line 1: the header must hold the columns {', '.join(_REQUIRED)} "
+                f"(optional: elevation, mask), missing {missing}; got {header}"
+            )
+        col = {name: header.index(name) for name in (*_REQUIRED, "elevation", "mask") if name in header}
+        entries = []
+        for row in reader:
+            where = f"{manifest} line {reader.line_num}"
+            if not any(cell.strip() for cell in row):
+                continue  # blank lines separate groups in hand-written manifests
+            if len(row) != len(header):
+                raise ValueError(f"{where}: has {len(row)} fields, the header {len(header)}")
+            cells = {name: row[i].strip() for name, i in col.items()}
+            if not cells["path"]:
+                raise ValueError(f"{where}: path must name an image file, got an empty field")
+            mask = base / cells["mask"] if cells.get("mask") else None
+            entries.append(
+                _entry(
+                    base / cells["path"],
+                    cells["object"],
+                    cells["azimuth"],
+                    cells.get("elevation"),
+                    mask,
+                    where,
+                )
+            )
+    return entries
+
+
+def _literal(pattern: str, text: str) -> str:
+    """The escaped literal text between two fields; a stray brace is an error."""
+    if "{" in text or "}" in text:
+        raise ValueError(f"pattern={pattern!r} holds an unmatched brace in {text!r}")
+    return re.escape(text)
+
+
+def _pattern_regex(pattern: str) -> re.Pattern[str]:
+    """The regular expression of a folder pattern; the second ``{object}`` must repeat the first."""
+    parts, seen, pos = [], set(), 0
+    for m in _FIELD_RE.finditer(pattern):
+        name = m.group(1)
+        if name not in _FIELDS:
+            raise ValueError(f"pattern={pattern!r}: unknown field {{{name}}} (fields: {', '.join(_FIELDS)})")
+        parts.append(_literal(pattern, pattern[pos : m.start()]))
+        if name in seen:
+            parts.append(f"(?P={name})")
+        else:
+            parts.append(f"(?P<{name}>[^/]+?)" if name == "object" else f"(?P<{name}>{_NUMBER})")
+            seen.add(name)
+        pos = m.end()
+    parts.append(_literal(pattern, pattern[pos:]))
+    if not {"object", "azimuth"} <= seen:
+        raise ValueError(f"pattern={pattern!r} must name the fields {{object}} and {{azimuth}}")
+    if pattern.startswith("/") or ".." in pattern.split("/"):
+        raise ValueError(f"pattern={pattern!r} must be a path relative to the root, inside it")
+    return re.compile("".join(parts))
+
+
+def _pattern_entries(root: Path, pattern: str) -> list[ViewEntry]:
+    """The files under ``root`` whose relative path matches ``pattern``, in sorted order."""
+    regex = _pattern_regex(pattern)
+    entries = []
+    for folder, dirs, files in os.walk(root):
+        dirs.sort()
+        for name in sorted(files):
+            path = Path(folder) / name
+            m = regex.fullmatch(path.relative_to(root).as_posix())
+            if m is not None:
+                fields = m.groupdict()
+                entries.append(
+                    _entry(
+                        path, fields["object"], fields["azimuth"], fields.get("elevation"), None, str(path)
+                    )
+                )
+    if not entries:
+        raise ValueError(f"root={str(root)!r} holds no file that matches pattern={pattern!r}")
+    return entries
+
+
+class ViewManifest:
+    """Views of objects with their angles (and masks): the input of :class:`ViewDataset`.
+
+    Made with :meth:`from_csv`, :meth:`from_pattern` or :meth:`from_coil`, or from a list
+    of :class:`ViewEntry`. No two entries may show the same object at the same azimuth
+    (modulo 360) and elevation.
+
+    Args:
+        entries: The views, in their listed order.
+        name: What the views came from, for ``repr`` and errors.
+
+    Raises:
+        ValueError: No entry, or two entries name the same view (the message names both).
+    """
+
+    def __init__(self, entries: Sequence[ViewEntry], name: str = "manifest") -> None:
+        entries = list(entries)
+        if not entries:
+            raise ValueError(f"{name} lists no view")
+        if not all(isinstance(e, ViewEntry) for e in entries):
+            raise TypeError("entries must all be ViewEntry")
+        seen: dict[tuple[str, float, float | None], ViewEntry] = {}
+        for e in entries:
+            key = (e.object, e.azimuth, None if math.isnan(e.elevation) else e.elevation)
+            if key in seen:
+                raise ValueError(
+                    f"{e.source}: duplicates the view of {seen[key].source} (object {e.object!r}, "
+                    f"azimuth {e.azimuth:g}, elevation {e.elevation:g}): {e.path} and {seen[key].path}"
+                )
+            seen[key] = e
+        self.entries: list[ViewEntry] = entries
+        self.name = name
+
+    @classmethod
+    def from_csv(cls, path: str | os.PathLike[str]) -> ViewManifest:
+        """Reads a CSV manifest (see the module docstring).
+
+        Raises:
+            TypeError: ``path`` is not a path.
+            ValueError: The file cannot be read, a column is missing, or a line names a
+                missing file, a non-numeric angle or a duplicate view; the message names
+                the manifest and the line.
+        """
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError(f"path must be a str or a path, got {type(path).__name__}")
+        manifest = Path(path)
+        check_regular_file(manifest, "manifest")
+        return cls(_csv_entries(manifest), name=str(manifest))
+
+    @classmethod
+    def from_pattern(cls, root: str | os.PathLike[str], pattern: str) -> ViewManifest:
+        """The files under ``root`` whose path relative to it matches ``pattern``.
+
+        Args:
+            root: The folder searched (recursively).
+            pattern: A relative path with the fields ``{object}`` (any text without ``/``;
+                repeated, it must repeat the same text), ``{azimuth}`` and optionally
+                ``{elevation}`` (numbers of degrees), e.g. ``"{object}/{object}-{azimuth}.png"``.
+                Files that do not match are ignored.
+
+        Raises:
+            TypeError: ``root`` is not a path or ``pattern`` not a str.
+            ValueError: ``root`` is not a folder, the pattern is malformed or lacks
+                ``{object}`` or ``{azimuth}``, no file matches, or two files name one view.
+        """
+        if not isinstance(root, (str, os.PathLike)):
+            raise TypeError(f"root must be a str or a path, got {type(root).__name__}")
+        if not isinstance(pattern, str):
+            raise TypeError(f"pattern must be a str, got {type(pattern).__name__}")
+        folder = Path(root)
+        if not folder.is_dir():
+            raise ValueError(f"root={str(folder)!r} must be an existing directory")
+        return cls(_pattern_entries(folder, pattern), name=f"{folder}/{pattern}")
+
+    @classmethod
+    def from_coil(cls, root: str | os.PathLike[str], *, pose_unit: str = "auto") -> ViewManifest:
+        """A manifest of a COIL folder (``obj{O}__{P}.png``), parsed by :class:`CoilFolder`.
+
+        The objects are named ``str(O)``; the azimuths are :class:`CoilFolder`'s (``5·P``
+        degrees for COIL-20 indices, ``P`` for COIL-100), elevation ``nan``, no mask.
+        """
+        coil = CoilFolder(root, pose_unit=pose_unit)
+        entries = [
+            ViewEntry(
+                path=coil.path(o, deg),
+                object=str(o),
+                azimuth=deg,
+                elevation=math.nan,
+                mask=None,
+                source=str(coil.path(o, deg)),
+            )
+            for o in coil.objects
+            for deg in coil.poses(o)
+        ]
+        return cls(entries, name=str(coil.root))
+
+    @property
+    def objects(self) -> list[str]:
+        """The object names, in the order of their first view."""
+        return list(dict.fromkeys(e.object for e in self.entries))
+
+    def views(self, obj: str) -> list[ViewEntry]:
+        """The views of object ``obj``, sorted by azimuth (then elevation)."""
+        views = [e for e in self.entries if e.object == obj]
+        if not views:
+            raise ValueError(f"object={obj!r} is not in {self.name} (objects: {self.objects[:10]})")
+        return sorted(views, key=lambda e: (e.azimuth, -math.inf if math.isnan(e.elevation) else e.elevation))
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __getitem__(self, index: int) -> ViewEntry:
+        return self.entries[index]
+
+    def __iter__(self) -> Iterator[ViewEntry]:
+        return iter(self.entries)
+
+    def __repr__(self) -> str:
+        return f"ViewManifest({self.name!r}, objects={len(self.objects)}, views={len(self)})"
