@@ -72,6 +72,16 @@ def test_coil20_image_matches_file(coil20: CoilFolder) -> None:
 
 @needs_coil20
 @pytest.mark.coil
+def test_images_arrive_on_the_folder_device(coil20: CoilFolder) -> None:
+    """The device argument places every returned view (the meta device stands in for CUDA)."""
+    meta = CoilFolder(COIL20, device="meta")
+    views = meta.images(1, [0.0, 5.0])
+    assert views.device.type == "meta" and views.shape == (2, 1, 128, 128)
+    assert coil20.images(1, [0.0]).device.type == "cpu"
+
+
+@needs_coil20
+@pytest.mark.coil
 def test_coil20_images_and_load_all(coil20: CoilFolder) -> None:
     stack = coil20.images(2, [0, 5, 350])
     assert stack.shape == (3, 1, 128, 128)

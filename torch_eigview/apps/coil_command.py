@@ -7,7 +7,6 @@ folder of ``obj{O}__{P}.png`` images in, a per-object accuracy table out.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
@@ -26,7 +25,6 @@ if TYPE_CHECKING:
     import torch
 
     from torch_eigview.apps.experiment import CoilResult
-    from torch_eigview.datasets.coil import CoilFolder
 
 __all__ = ["add_coil_command", "format_table", "run_coil"]
 
@@ -191,7 +189,7 @@ def run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.synthesis import SynthesisOptions
 
     check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
-    folder = _on_device(CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit), _device(args.device))
+    folder = CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit, device=_device(args.device))
     _check_circle_flags(args)
     experiment = CoilExperiment(
         alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
@@ -244,20 +242,3 @@ def _device(name: str) -> torch.device:
     if name == "cuda" and not torch.cuda.is_available():
         raise ValueError("--device cuda needs a CUDA device, but torch.cuda.is_available() is False")
     return torch.device(name)
-
-
-def _on_device(folder: CoilFolder, device: torch.device) -> CoilFolder:
-    """``folder`` whose images arrive on ``device``: the whole experiment then runs there
-    (seeds, warp, eigenspace, recognition) except the optical flow, which scikit-image runs
-    on the CPU (the correspondence moves the seeds there and its result back)."""
-    if device.type == "cpu":
-        return folder
-    from torch_eigview.datasets.coil import CoilFolder
-
-    class DeviceFolder(CoilFolder):
-        def images(self, obj: int, degrees_list: Sequence[float] | torch.Tensor) -> torch.Tensor:
-            return super().images(obj, degrees_list).to(device)
-
-    moved = DeviceFolder.__new__(DeviceFolder)
-    moved.__dict__.update(folder.__dict__)
-    return moved

@@ -186,6 +186,7 @@ class CoilFolder:
             has, and an error when the objects disagree (a stray file). A COIL-100 subset
             whose poses all lie below 72 degrees is thus read as indices; pass the unit then.
         dtype: Floating dtype of the returned tensors.
+        device: Device of the returned tensors (files are read and decoded on the CPU).
 
     Raises:
         TypeError: ``root`` is not a path, ``pose_unit`` not a str or ``dtype`` not a
@@ -197,7 +198,12 @@ class CoilFolder:
     """
 
     def __init__(
-        self, root: str | os.PathLike[str], *, pose_unit: str = "auto", dtype: torch.dtype = torch.float32
+        self,
+        root: str | os.PathLike[str],
+        *,
+        pose_unit: str = "auto",
+        dtype: torch.dtype = torch.float32,
+        device: torch.device | str = "cpu",
     ) -> None:
         if not isinstance(root, (str, os.PathLike)):
             raise TypeError(f"root must be a str or a path, got {type(root).__name__}")
@@ -213,6 +219,7 @@ class CoilFolder:
         self.pose_unit = _pose_unit(found) if pose_unit == "auto" else pose_unit
         pose_unit = self.pose_unit
         self.dtype = dtype
+        self.device = torch.device(device)
         step, limit = (5.0, _N_INDEX_POSES) if pose_unit == "index" else (1.0, 360)
         self._files: dict[int, dict[float, Path]] = {}
         for obj, p, path in sorted(found):
@@ -343,4 +350,4 @@ class CoilFolder:
         # here also hands out a fresh tensor, so callers cannot alter the cache in place.
         # The pixels are those of ``eigview predict``, which converts with the same function.
         work = np.float64 if self.dtype == torch.float64 else np.float32
-        return torch.from_numpy(to_unit_float(arr, work)).to(self.dtype)
+        return torch.from_numpy(to_unit_float(arr, work)).to(self.device, self.dtype)
