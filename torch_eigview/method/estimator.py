@@ -6,7 +6,10 @@ correspondences of its seed views and the views synthesized over a range of angl
 (:func:`~torch_eigview.synthesis.synthesize_views`, Sec. 4.1 sectors for more than two
 seeds); one eigenspace over every object's gallery views, each scaled to unit L2 norm
 (Murase and Nayar's brightness normalization); the frozen projection layer; and the
-nearest-neighbour recognizer over the gallery's coordinates (Sec. 4.2).
+nearest-neighbour recognizer over the gallery's coordinates (Sec. 4.2). With
+``reject_rate``, ``fit`` also synthesizes views at poses held out from the gallery and
+calibrates the recognizer's rejection of unknown objects on them
+(:mod:`torch_eigview.method.rejection`).
 
 It follows scikit-learn's conventions: hyperparameters are stored as given by
 ``__init__`` and validated by ``fit``, learned state ends in ``_``, ``fit`` returns self.
@@ -18,11 +21,12 @@ from collections.abc import Iterator
 
 import torch
 
-from torch_eigview.check import check_int
+from torch_eigview.check import check_choice, check_int
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.decomposition.streaming import StreamingEigenspace
 from torch_eigview.errors import NotFittedError
+from torch_eigview.geometry.angles import angle_range
 from torch_eigview.method.inputs import (
     Params,
     block_item,
@@ -35,6 +39,7 @@ from torch_eigview.method.inputs import (
     seed_steps,
     wrap_degrees,
 )
+from torch_eigview.method.rejection import REJECT_SCORES, calibrate_rejection, check_reject_rate
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
@@ -64,6 +69,16 @@ class FewViewEigenspace:
         synth_follows_seeds: with more than two seeds, extend ``synth`` on the seeds'
             side by the steps past the first pair (as ``CoilExperiment``).
         max_views: the most gallery views :meth:`fit_blocks` holds at once.
+        reject_rate: None (no rejection), or the fraction in (0, 1) of known views one
+            accepts to reject as unknown: ``fit`` calibrates the recognizer's thresholds
+            on views synthesized at ``reject_poses`` (:func:`calibrate_rejection`); 0.05
+            is a good start. Needs ``synth``.
+        reject_score: the rejection score, ``"difs"`` (distance to the nearest gallery
+            view; the best on COIL-20), ``"dffs"`` or ``"both"``.
+        reject_poses: (start, stop, step) in degrees, relative to each object's first
+            seed, of the held-out views: the poses at which known objects are to be met
+            (the threshold grows with how far they lie past the gallery); poses that are
+            gallery poses are left out.
 
     Example:
         >>> seeds = torch.rand(2, 2, 1, 16, 16)  # 2 objects, seed views at 0 and 10 degrees
@@ -83,6 +98,9 @@ class FewViewEigenspace:
         gamma: float | str | None = None,
         synth_follows_seeds: bool = True,
         max_views: int = 4096,
+        reject_rate: float | None = None,
+        reject_score: str = "difs",
+        reject_poses: tuple[float, float, float] = (-45.0, 45.0, 2.5),
     ) -> None:
         self.n_components = n_components
         self.synth = synth
@@ -92,6 +110,9 @@ class FewViewEigenspace:
         self.gamma = gamma
         self.synth_follows_seeds = synth_follows_seeds
         self.max_views = max_views
+        self.reject_rate = reject_rate
+        self.reject_score = reject_score
+        self.reject_poses = reject_poses
 
     def __repr__(self) -> str:
         return f"FewViewEigenspace(n_components={self.n_components!r}, synth={self.synth!r}, kernel={self.kernel!r})"
@@ -117,6 +138,20 @@ class FewViewEigenspace:
             self.synth_follows_seeds,
             check_int(self.max_views, "max_views", 1),
         )
+
+    def _reject_params(self, synth: object) -> tuple[float, str, tuple[float, float, float]] | None:
+        if self.reject_rate is None:
+            return None
+        rate = check_reject_rate(self.reject_rate)
+        score = check_choice(self.reject_score, "reject_score", REJECT_SCORES)
+        poses = check_synth(self.reject_poses, "reject_poses")
+        assert poses is not None
+        if synth is None:
+            raise ValueError(
+                f"reject_rate={rate} calibrates on synthesized views: it needs synth, got synth=None "
+                "(or calibrate on held-out views with calibrate_rejection)"
+            )
+        return rate, score, poses
 
     # ------------------------------------------------------------------ fitting
     def fit(self, seeds: object, seed_angles: object, labels: object = None) -> FewViewEigenspace:
@@ -144,6 +179,7 @@ class FewViewEigenspace:
             TypeError, ValueError: a bad hyperparameter or argument; the message names it.
         """
         params = self._params()
+        reject = self._reject_params(params.synth)
         objects = check_seeds(seeds)
         angles = check_angles(seed_angles, objects)
         names = check_labels(labels, len(objects))
@@ -151,13 +187,19 @@ class FewViewEigenspace:
         views: list[torch.Tensor] = []
         label_list: list[int] = []
         poses: list[float] = []
-        for block, label, block_poses in self._galleries(params, objects, angles, names):
+        held_out: list[torch.Tensor] = []
+        held_poses = None if reject is None else reject[2]
+        for block, label, block_poses in self._galleries(
+            params, objects, angles, names, held_poses, held_out
+        ):
             views.append(block)
             label_list += [label] * len(block_poses)
             poses += block_poses
         x = torch.cat(views)
         with torch.no_grad():
             self._fit_gallery(params, x, torch.tensor(label_list), torch.tensor(poses, dtype=x.dtype))
+        if reject is not None:
+            calibrate_rejection(self.recognizer_, torch.cat(held_out), reject[0], reject[1])
         return self
 
     def _galleries(
@@ -166,8 +208,12 @@ class FewViewEigenspace:
         objects: list[torch.Tensor],
         angles: list[list[float]],
         labels: list[int],
+        held_poses: tuple[float, float, float] | None = None,
+        held_out: list[torch.Tensor] | None = None,
     ) -> Iterator[Gallery]:
-        """Per object its gallery views, label and poses; appends its elevations to ``elevations_``."""
+        """Per object its gallery views, label and poses; appends its elevations to
+        ``elevations_``, and to ``held_out`` its views synthesized at ``held_poses`` (start,
+        stop, step) that are not gallery poses (in the same call, from the same geometry)."""
         for views, seed_angles, label in zip(objects, angles, labels, strict=True):
             if params.synth is None:
                 yield views, label, seed_angles
@@ -179,9 +225,12 @@ class FewViewEigenspace:
             steps = seed_steps(seed_angles)
             alpha: float | list[float] = steps[0] if len(set(steps)) == 1 else steps
             thetas = params.thetas(steps)
-            out = synthesize_views(views, alpha, thetas, params.options)
+            held = [] if held_poses is None else _held_out_thetas(held_poses, thetas)
+            out = synthesize_views(views, alpha, thetas + held, params.options)
             self.elevations_.append(out.elevations)
-            yield out.views, label, [seed_angles[0] + t for t in thetas]
+            if held_out is not None:
+                held_out.append(out.views[len(thetas) :])
+            yield out.views[: len(thetas)], label, [seed_angles[0] + t for t in thetas]
 
     def _fit_gallery(
         self, params: Params, x: torch.Tensor, labels: torch.Tensor, poses: torch.Tensor
@@ -245,6 +294,11 @@ class FewViewEigenspace:
             raise ValueError(
                 f"fit_blocks fits the linear eigenspace only: kernel must be None, got {params.kernel!r}"
             )
+        if self.reject_rate is not None:
+            raise ValueError(
+                f"fit_blocks synthesizes nothing to calibrate reject_rate={self.reject_rate!r} on: set "
+                "reject_rate=None and call calibrate_rejection(est.recognizer_, held_out_views, rate)"
+            )
         source = block_source(blocks)
 
         def prepared() -> Iterator[torch.Tensor]:
@@ -278,9 +332,10 @@ class FewViewEigenspace:
             )
         return self.recognizer_
 
-    def predict(self, views: torch.Tensor) -> Recognition:
-        """Recognizes (B, C, H, W) or (B, N) views: labels, poses, distances, gallery indices, each (B,)."""
-        return self._fitted("predict").predict(views)
+    def predict(self, views: torch.Tensor, *, reject: bool = False) -> Recognition:
+        """Recognizes (B, C, H, W) or (B, N) views: labels, poses, distances, gallery indices,
+        each (B,), and with ``reject`` (fitted with ``reject_rate``) ``known``."""
+        return self._fitted("predict").predict(views, reject=reject)
 
     def transform(self, views: torch.Tensor) -> torch.Tensor:
         """(B, C, H, W) or (B, N) views → (B, k) eigenspace coordinates."""
@@ -296,3 +351,13 @@ class FewViewEigenspace:
         if isinstance(self.eigenspace_, KernelEigenspace):
             return self.eigenspace_.to_module(unit_norm=unit)
         return self.eigenspace_.to_module(unit_norm=unit, image_shape=self.image_shape_)
+
+
+def _held_out_thetas(poses: tuple[float, float, float], gallery: list[float]) -> list[float]:
+    """The angles of ``angle_range(*poses)`` that are not gallery angles (1e-6 degrees apart)."""
+    held = [t for t in angle_range(*poses, "reject_poses") if min(abs(t - g) for g in gallery) > 1e-6]
+    if not held:
+        raise ValueError(
+            f"reject_poses={poses} holds gallery poses only: the held-out views must lie off the gallery"
+        )
+    return held

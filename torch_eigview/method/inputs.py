@@ -71,18 +71,20 @@ class Params:
         return angle_range(start, stop, step, "synth")
 
 
-def check_synth(synth: object) -> tuple[float, float, float] | None:
+def check_synth(synth: object, name: str = "synth") -> tuple[float, float, float] | None:
+    """None, or (start, stop, step) finite degrees with step > 0 and start <= stop; the
+    messages name the argument ``name``."""
     if synth is None:
         return None
     if not isinstance(synth, Sequence) or isinstance(synth, str) or len(synth) != 3:
-        raise ValueError(f"synth must be (start, stop, step) in degrees, got {synth!r}")
-    start, stop, step = (check_number(v, f"synth[{i}]") for i, v in enumerate(synth))
+        raise ValueError(f"{name} must be (start, stop, step) in degrees, got {synth!r}")
+    start, stop, step = (check_number(v, f"{name}[{i}]") for i, v in enumerate(synth))
     if not all(math.isfinite(v) for v in (start, stop, step)):
-        raise ValueError(f"synth must hold finite angles, got {synth!r}")
+        raise ValueError(f"{name} must hold finite angles, got {synth!r}")
     if not step > 0:
-        raise ValueError(f"synth step must be positive, got {step}")
+        raise ValueError(f"{name} step must be positive, got {step}")
     if stop < start:
-        raise ValueError(f"synth must have start <= stop, got start={start}, stop={stop}")
+        raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
     return start, stop, step
 
 

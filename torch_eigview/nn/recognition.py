@@ -6,6 +6,10 @@ interpolate_pose=True)`` refines the pose on the appearance manifold, as Murase 
 do: each object's gallery codes in pose order form a curve, taken piecewise linear
 between consecutive views; the test code is projected onto the two segments that meet at
 its nearest view, and the pose is interpolated along the closer one.
+
+With rejection thresholds set (:meth:`NearestNeighborRecognizer.set_rejection`),
+``predict(x, reject=True)`` also says which views are of known objects
+(:mod:`torch_eigview.nn.rejection`).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from torch import nn
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.nn.rejection import NOT_CALIBRATED, check_reject_thresholds, dffs_of, thresholded_score
 
 __all__ = ["NearestNeighborRecognizer", "Recognition", "pose_neighbours"]
 
@@ -32,12 +37,16 @@ class Recognition:
         poses: (B,) pose of that view in degrees.
         distances: (B,) Euclidean distance to it in the eigenspace.
         indices: (B,) int64 index of that view in the gallery.
+        known: (B,) bool, True where the view passed the rejection thresholds (its label
+            stands), False for a view taken to be of an unknown object; None when
+            rejection was not asked for.
     """
 
     labels: torch.Tensor
     poses: torch.Tensor
     distances: torch.Tensor
     indices: torch.Tensor
+    known: torch.Tensor | None = None
 
 
 class NearestNeighborRecognizer(nn.Module):
@@ -54,6 +63,8 @@ class NearestNeighborRecognizer(nn.Module):
         labels: (G,) int64 object labels.
         poses: (G,) poses in degrees.
         label_names: optional names, one per distinct label value, in sorted label order.
+        reject_thresholds: optional (2,) rejection thresholds ``(t_dffs, t_difs)``, see
+            :meth:`set_rejection`; kept in the ``reject_thresholds`` buffer, (0,) when None.
 
     Example:
         >>> proj = EigenProjection(torch.zeros(4), torch.eye(4)[:2])
@@ -68,6 +79,7 @@ class NearestNeighborRecognizer(nn.Module):
     codes_sqnorm: torch.Tensor
     pose_before: torch.Tensor
     pose_after: torch.Tensor
+    reject_thresholds: torch.Tensor
 
     def __init__(
         self,
@@ -76,6 +88,7 @@ class NearestNeighborRecognizer(nn.Module):
         labels: torch.Tensor,
         poses: torch.Tensor,
         label_names: list[str] | None = None,
+        reject_thresholds: torch.Tensor | None = None,
     ) -> None:
         super().__init__()
         n_components = getattr(projection, "n_components", None)
@@ -129,6 +142,8 @@ class NearestNeighborRecognizer(nn.Module):
         before, after = pose_neighbours(self.labels, self.poses)
         self.register_buffer("pose_before", before, persistent=False)
         self.register_buffer("pose_after", after, persistent=False)
+        self.register_buffer("reject_thresholds", codes.new_empty(0))
+        self.set_rejection(reject_thresholds)
 
     @classmethod
     def from_views(
@@ -148,9 +163,37 @@ class NearestNeighborRecognizer(nn.Module):
     def n_gallery(self) -> int:
         return self.codes.shape[0]
 
+    @property
+    def rejects(self) -> bool:
+        """Whether rejection thresholds are set (``predict(..., reject=True)`` works)."""
+        return self.reject_thresholds.numel() == 2
+
+    def set_rejection(self, thresholds: torch.Tensor | None) -> None:
+        """Sets (or with None clears) the thresholds a known view must stay within: (2,)
+        ``(t_dffs, t_difs)``, the largest distance from feature space and to the nearest
+        gallery view; each > 0, or ``inf`` to leave it out (see
+        :func:`~torch_eigview.nn.rejection.check_reject_thresholds`, which raises)."""
+        if thresholds is None:
+            self.reject_thresholds = self.codes.new_empty(0)
+            return
+        check_reject_thresholds(thresholds, isinstance(self.projection, EigenProjection))
+        self.reject_thresholds = thresholds.detach().to(self.codes).clone()
+
+    def _load_from_state_dict(self, state_dict: dict[str, object], prefix: str, *args: object) -> None:
+        # Calibrated or not, the buffer is (2,) or (0,); a recognizer built without
+        # thresholds takes a saved one's.
+        incoming = state_dict.get(prefix + "reject_thresholds")
+        if isinstance(incoming, torch.Tensor) and tuple(incoming.shape) in {(0,), (2,)}:
+            self.reject_thresholds = self.reject_thresholds.new_empty(incoming.shape)
+        super()._load_from_state_dict(state_dict, prefix, *args)
+
     def extra_repr(self) -> str:
         n_labels = int(self.labels.unique().numel())
-        return f"gallery={self.n_gallery}, labels={n_labels}"
+        text = f"gallery={self.n_gallery}, labels={n_labels}"
+        if self.rejects:
+            t_dffs, t_difs = self.reject_thresholds.tolist()
+            text += f", reject_thresholds=(t_dffs={t_dffs:.4g}, t_difs={t_difs:.4g})"
+        return text
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Recognizes a batch of views.
@@ -180,7 +223,38 @@ class NearestNeighborRecognizer(nn.Module):
         best, index = sq.min(dim=1)
         return self.labels[index], self.poses[index], best.clamp_min(0).sqrt(), index, z
 
-    def predict(self, x: torch.Tensor, *, interpolate_pose: bool = False) -> Recognition:
+    def novelty_scores(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The two scores rejection compares with its thresholds, unchecked as ``forward``.
+
+        Args:
+            x: (B, C, H, W) or (B, N) views (the projection's dtype and size).
+
+        Returns:
+            ``(dffs, difs)``, each (B,): the L2 distance of the prepared view (flattened,
+            unit-norm if the layer is) from the eigenspace, ``sqrt(|v − mean|² − |z|²)``
+            (NaN for a kernel projection, which has no linear feature space), and the
+            distance to the nearest gallery view.
+        """
+        _, _, difs, _, z = self._search_codes(x)
+        return dffs_of(self.projection, x, z), difs
+
+    def rejection_scores(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, C, H, W) or (B, N) views → (B,) scores in units of the thresholds: a view is
+        known when its score is <= 1 (:func:`~torch_eigview.nn.rejection.rejection_score`).
+        Sweeping the limit 1 over the scores gives the ROC of the rejection.
+
+        Raises:
+            ValueError: no thresholds are set (``reject``).
+        """
+        if not self.rejects:
+            raise ValueError(NOT_CALIBRATED)
+        with torch.no_grad():
+            _, _, difs, _, z = self._search_codes(x)
+            return thresholded_score(self.projection, x, z, difs, self.reject_thresholds)
+
+    def predict(
+        self, x: torch.Tensor, *, interpolate_pose: bool = False, reject: bool = False
+    ) -> Recognition:
         """Like ``forward``, as a :class:`Recognition` that also holds the gallery indices,
         with the checks ``forward`` leaves out: finite views, and for a unit-norm projection
         views whose L2 norm does not overflow the dtype (they would project to zeros).
@@ -190,15 +264,19 @@ class NearestNeighborRecognizer(nn.Module):
             interpolate_pose: refine each pose between the nearest gallery view and its
                 neighbours in pose order (:meth:`interpolate_poses`); else the nearest
                 view's pose, as ``forward`` (and the ONNX graph) give it.
+            reject: fill ``known`` by the rejection thresholds (:meth:`rejection_scores`).
 
         Raises:
             TypeError: ``x`` is not a float tensor (or not of the layer's dtype), or
-                ``interpolate_pose`` is not a bool.
-            ValueError: a bad shape, NaN or infinite values, norms that overflow, or
-                non-finite distances (a damaged gallery).
+                ``interpolate_pose`` or ``reject`` is not a bool.
+            ValueError: a bad shape, NaN or infinite values, norms that overflow,
+                non-finite distances (a damaged gallery), or ``reject`` without thresholds.
         """
-        if not isinstance(interpolate_pose, bool):
-            raise TypeError(f"interpolate_pose must be a bool, got {type(interpolate_pose).__name__}")
+        for flag, name in ((interpolate_pose, "interpolate_pose"), (reject, "reject")):
+            if not isinstance(flag, bool):
+                raise TypeError(f"{name} must be a bool, got {type(flag).__name__}")
+        if reject and not self.rejects:
+            raise ValueError(NOT_CALIBRATED)
         check_float_tensor(x, "x")
         check_ndim(x, "x", (2, 4), "(B, N) or (B, C, H, W)")
         if x.numel() and not bool(torch.isfinite(x.sum())):
@@ -222,10 +300,15 @@ class NearestNeighborRecognizer(nn.Module):
                 f"magnitude {float(x.abs().max()):.3g}) overflow {x.dtype} in the projection, or the gallery "
                 "or projection is damaged"
             )
-        if interpolate_pose:
-            with torch.no_grad():
+        with torch.no_grad():
+            if interpolate_pose:
                 poses = self.interpolate_poses(z, index)
-        return Recognition(labels, poses, distances, index)
+            known = (
+                thresholded_score(self.projection, x, z, distances, self.reject_thresholds) <= 1
+                if reject
+                else None
+            )
+        return Recognition(labels, poses, distances, index, known)
 
     def interpolate_poses(self, z: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
         """Poses interpolated on the appearance manifold (Murase and Nayar's pose estimate).
