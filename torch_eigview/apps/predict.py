@@ -12,6 +12,7 @@ graph is checked before onnxruntime runs it (:mod:`torch_eigview.io.onnx_check`)
 Usage::
 
     eigview predict --onnx model.onnx obj1__0.png obj2__0.png --json predictions.json
+    eigview predict --onnx model.onnx --reject photo.png   # "unknown" for rejected images
     python -m torch_eigview.apps.predict --onnx model.onnx IMAGES...
 """
 
@@ -41,15 +42,20 @@ _BATCH = 64
 
 @dataclass(frozen=True)
 class Prediction:
-    """One recognized image: its file, label name, pose (degrees) and eigenspace distance."""
+    """One recognized image: its file, label name, pose (degrees) and eigenspace distance, and
+    whether the model's rejection took it for a known object (None: not asked)."""
 
     image: str
     label: str
     pose: float
     distance: float
+    known: bool | None = None
 
     def to_json(self) -> dict[str, Any]:
-        return {"image": self.image, "label": self.label, "pose": self.pose, "distance": self.distance}
+        out = {"image": self.image, "label": self.label, "pose": self.pose, "distance": self.distance}
+        if self.known is not None:
+            out["known"] = self.known
+        return out
 
 
 def escape(text: str) -> str:
@@ -116,7 +122,9 @@ class OnnxRecognizer:
         """Recognizes (B, C, H, W) float32 ``images`` (one onnxruntime call); ``names`` are
         their files. A row whose label index lies outside the model's label names or whose
         pose or distance is not finite comes back as its error message instead."""
-        index, pose, distance = self.session.run(None, {self.input_name: images})
+        outputs = self.session.run(None, {self.input_name: images})
+        index, pose, distance = outputs[:3]
+        known = outputs[3] if len(outputs) == 4 else None
         labels = self.info.label_names
         out: list[Prediction | str] = []
         for j, name in enumerate(names):
@@ -131,7 +139,7 @@ class OnnxRecognizer:
                     f"image {name}: the model gave a non-finite pose {p} or distance {d} (damaged model)"
                 )
             else:
-                out.append(Prediction(name, labels[i], p, d))
+                out.append(Prediction(name, labels[i], p, d, None if known is None else bool(known[j])))
         return out
 
     def predict(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction]:
@@ -176,6 +184,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "images", nargs="+", metavar="IMAGE", help="image files, each (C, H, W) like the model's"
     )
     parser.add_argument("--json", metavar="FILE", help="write a list of {image, label, pose, distance}")
+    parser.add_argument(
+        "--reject",
+        action="store_true",
+        help="answer 'unknown' for images the model's calibrated rejection takes for unknown objects "
+        "(a model fitted with rejection)",
+    )
     # For the test that checks this path never imports torch.
     parser.add_argument("--debug-modules", action="store_true", help=argparse.SUPPRESS)
 
@@ -208,6 +222,11 @@ def run(args: argparse.Namespace) -> int:
         inputs = [("--onnx", args.onnx), *(("IMAGE", path) for path in args.images)]
         check_output_path(args.json, "--json", inputs=inputs)
     model = OnnxRecognizer(args.onnx)
+    if args.reject and not model.info.reject:
+        raise ValueError(
+            f"--reject needs a model with rejection thresholds (a 'known' output); ONNX model "
+            f"{args.onnx!r} has none: fit it with rejection calibrated and export it again"
+        )
     predictions: list[Prediction] = []
     n_failed = 0
     for images, names, failed in _batches(model, args.images):
@@ -219,9 +238,8 @@ def run(args: argparse.Namespace) -> int:
                 continue
             if args.json:  # held for the file only: memory stays flat without it
                 predictions.append(row)
-            print(
-                f"{escape(row.image)}\tlabel {escape(row.label)}\tpose {row.pose:g}\tdistance {row.distance:.6g}"
-            )
+            label = "unknown" if args.reject and row.known is False else f"label {escape(row.label)}"
+            print(f"{escape(row.image)}\t{label}\tpose {row.pose:g}\tdistance {row.distance:.6g}")
     if args.json:
         write_json(args.json, [p.to_json() for p in predictions])
     if n_failed:

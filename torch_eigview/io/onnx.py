@@ -2,7 +2,8 @@
 
 The exporter is ``torch.onnx.export(..., dynamo=True)`` with a dynamic batch axis: the graph
 takes ``images`` (B, C, H, W) float32 and gives ``coefficients`` (B, k) for a projection, or
-``label_index``, ``pose`` and ``distance`` (B,) each for a recognizer. The graph's
+``label_index``, ``pose`` and ``distance`` (B,) each for a recognizer, and ``known`` (B,)
+bool for one with rejection thresholds. The graph's
 ``metadata_props`` describe it (:class:`~torch_eigview.io.onnx_metadata.OnnxModelInfo`), so the
 torch-free ``eigview predict`` can check its inputs.
 
@@ -133,9 +134,11 @@ def _prepare(
             unit_norm=recognizer.unit_norm,
             label_names=tuple(recognizer.label_names),
             module=type(module).__name__,
+            reject=recognizer.rejects,
         )
         shape, example = _input_shape(module.projection, image_shape, example_input)
-        return recognizer, info, RECOGNIZER_OUTPUTS, _sample(shape, example)
+        outputs = (*RECOGNIZER_OUTPUTS, "known") if recognizer.rejects else RECOGNIZER_OUTPUTS
+        return recognizer, info, outputs, _sample(shape, example)
     shape, example = _input_shape(module, image_shape, example_input)
     exported = projection_module(module, fold, torch.float32).eval()
     sample = _sample(shape, example)
@@ -315,7 +318,8 @@ def compare_with_eager(
     Returns:
         For a projection ``max_rel_err``, ``max |onnx − eager| / max |eager|`` over the
         coefficients; for a recognizer ``label_agreement`` (the fraction of identical
-        labels), ``max_pose_diff`` and ``max_distance_diff``. Distances come from
+        labels), ``max_pose_diff`` and ``max_distance_diff``, and with rejection
+        ``known_agreement`` (the fraction of identical ``known`` answers). Distances come from
         ``|z|² − 2 z·g + |g|²`` (as in eager), which cancels near zero: in float32 a true
         distance of 0 reads up to about ``sqrt(1e-7 · |z|²)``, some 1e-4 for unit-norm views.
     """
@@ -337,11 +341,15 @@ def compare_with_eager(
             return {"max_rel_err": _rel_err(got[0], model(x).numpy())}
         labels, poses, distances = (t.numpy() for t in model(x))
         values = model.labels.unique().numpy()
-        return {
+        out = {
             "label_agreement": float(np.mean(values[got[0]] == labels)) if len(x) else 1.0,
             "max_pose_diff": float(np.abs(got[1] - poses).max(initial=0.0)),
             "max_distance_diff": float(np.abs(got[2] - distances).max(initial=0.0)),
         }
+        if model.rejects and len(got) == 4:
+            known = (model.rejection_scores(x) <= 1).numpy()
+            out["known_agreement"] = float(np.mean(got[3] == known)) if len(x) else 1.0
+        return out
 
 
 def _rel_err(got: np.ndarray, want: np.ndarray) -> float:

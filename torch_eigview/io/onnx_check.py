@@ -2,7 +2,8 @@
 
 ``eigview predict`` runs files it did not write. A graph that passes this check is one
 :mod:`torch_eigview.io.onnx` could have written: ``onnx.checker`` accepts it, it has the one
-``images`` input (B, C, H, W) float32 of its metadata and the recognizer's three outputs,
+``images`` input (B, C, H, W) float32 of its metadata and the recognizer's three outputs
+(four, with ``known``, when its metadata says it rejects),
 it uses only the operators our exports use (nothing that builds a tensor of a size read
 from data: no ``Expand``, ``Tile``, ``ConstantOfShape``, ``Range``, ``Resize``, loops), its
 weights are finite and its weights and per-image intermediate tensors (from ONNX shape
@@ -27,6 +28,7 @@ __all__ = ["ALLOWED_OPS", "MODEL_BYTES", "check_recognizer_graph", "model_byte_l
 ALLOWED_OPS = frozenset(
     {
         "Abs", "Add", "ArgMin", "Cast", "Clip", "Div", "Exp", "Gather", "GatherND", "Identity",
+        "LessOrEqual",
         "MatMul", "Max", "Min", "Mul", "Neg", "Pow", "ReduceL2", "ReduceMin", "ReduceSum",
         "ReduceSumSquare", "Reshape", "Sqrt", "Squeeze", "Sub", "Transpose", "Unsqueeze",
     }
@@ -66,8 +68,9 @@ def _check_io(graph: Any, info: OnnxModelInfo, source: str) -> None:
     if inputs[0].type.tensor_type.elem_type != onnx.TensorProto.FLOAT:
         raise ValueError(f"{source} must take float32 images")
     names = tuple(o.name for o in graph.output)
-    if names != OUTPUTS:
-        raise ValueError(f"{source} must have the outputs {OUTPUTS} of a recognizer, got {names}")
+    expected = (*OUTPUTS, "known") if info.reject else OUTPUTS
+    if names != expected:
+        raise ValueError(f"{source} must have the outputs {expected} of a recognizer, got {names}")
 
 
 def _check_weights(graph: Any, source: str, budget: int) -> None:

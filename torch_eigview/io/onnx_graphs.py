@@ -3,7 +3,8 @@
 :class:`FoldedProjection` is an :class:`EigenProjection` folded into one MatMul on the
 images, ``z = x @ Wᵀ − (mean @ Wᵀ)``: the same map with a (k,)-vector subtraction instead of
 a (B, N) one, ``mean @ Wᵀ`` computed in float64 at export time. :class:`ExportedRecognizer`
-is a :class:`NearestNeighborRecognizer` as a loop-free graph. Any other module (kernel PCA's
+is a :class:`NearestNeighborRecognizer` as a loop-free graph (with a fourth output,
+``known``, when the recognizer has rejection thresholds). Any other module (kernel PCA's
 ``KernelProjection``, an ``nn.Sequential`` of a projection and a head) is exported as it is.
 """
 
@@ -16,6 +17,7 @@ from torch import nn
 
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
+from torch_eigview.nn.rejection import rejection_score
 
 __all__ = ["ExportedRecognizer", "FoldedProjection", "image_shape_of", "projection_module"]
 
@@ -93,13 +95,18 @@ class ExportedRecognizer(nn.Module):
 
     The search is ``|z|² − 2 z·g + |g|²`` (MatMul), ReduceMin and ArgMin, then Gathers: no
     loops. Labels become indices into :attr:`label_names` (the recognizer's names, else its
-    label values as strings, in sorted label order).
+    label values as strings, in sorted label order). With rejection thresholds a fourth
+    output, ``known`` (B,) bool, applies them; the distance from feature space is then
+    ``|v|² − 2 v·mean + |mean|² − |z|²`` on the images (``v`` unit-norm when the layer is).
     """
 
     codes_t: torch.Tensor
     codes_sqnorm: torch.Tensor
     label_index: torch.Tensor
     poses: torch.Tensor
+    reject_inverse: torch.Tensor
+    mean: torch.Tensor
+    mean_sqnorm: torch.Tensor
 
     def __init__(self, recognizer: NearestNeighborRecognizer, dtype: torch.dtype = torch.float32) -> None:
         super().__init__()
@@ -120,10 +127,35 @@ class ExportedRecognizer(nn.Module):
         self.register_buffer("codes_sqnorm", codes.square().sum(dim=1).to(dtype))
         self.register_buffer("label_index", torch.searchsorted(values, labels))
         self.register_buffer("poses", recognizer.poses.detach().cpu().to(dtype))
+        self.rejects = recognizer.rejects
+        thresholds = recognizer.reject_thresholds.detach().cpu().double()
+        self.uses_dffs = self.rejects and bool(torch.isfinite(thresholds[0]))
+        self.register_buffer("reject_inverse", (1 / thresholds).to(dtype))  # finite: 0 for inf
+        if self.uses_dffs:
+            assert isinstance(source, EigenProjection)  # set_rejection allows a finite t_dffs only then
+            mean = source.mean.detach().cpu().double()
+            self.register_buffer("mean", mean.to(dtype))
+            self.register_buffer("mean_sqnorm", mean.square().sum().to(dtype))
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(B, C, H, W) images → ``(label_index, pose, distance)``, each (B,)."""
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """(B, C, H, W) images → ``(label_index, pose, distance)``, each (B,), and ``known``
+        (B,) bool when the recognizer rejects."""
         z = self.projection(x)
         sq = z.square().sum(dim=1, keepdim=True) - 2 * (z @ self.codes_t) + self.codes_sqnorm
         best, index = sq.min(dim=1)
-        return self.label_index[index], self.poses[index], best.clamp_min(0).sqrt()
+        difs = best.clamp_min(0).sqrt()
+        if not self.rejects:
+            return self.label_index[index], self.poses[index], difs
+        # difs * 0, not zeros_like: that exports as Shape and Expand, which onnx_check refuses.
+        dffs = self._dffs(x, z) if self.uses_dffs else difs * 0
+        known = rejection_score(dffs, difs, self.reject_inverse) <= 1
+        return self.label_index[index], self.poses[index], difs, known
+
+    def _dffs(self, x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        flat = x.flatten(1)
+        dot = flat @ self.mean
+        sq = flat.square().sum(dim=1)
+        if self.unit_norm:
+            norm = sq.sqrt().clamp_min(torch.finfo(x.dtype).tiny)
+            dot, sq = dot / norm, sq / norm.square()
+        return (sq - 2 * dot + self.mean_sqnorm - z.square().sum(dim=1)).clamp_min(0).sqrt()

@@ -31,6 +31,8 @@ class OnnxModelInfo:
         label_names: for a recognizer, the name of each label index (COIL: object ids as
             strings); empty for a projection.
         module: class name of the exported module (``EigenProjection``, ``KernelProjection``, …).
+        reject: a recognizer with rejection thresholds: the graph has a fourth output,
+            ``known`` (B,) bool. Absent from the metadata of older files (False).
     """
 
     kind: str
@@ -39,6 +41,7 @@ class OnnxModelInfo:
     unit_norm: bool
     label_names: tuple[str, ...] = ()
     module: str = ""
+    reject: bool = False
 
     def to_props(self) -> dict[str, str]:
         """The ``metadata_props`` string map."""
@@ -51,6 +54,7 @@ class OnnxModelInfo:
             "n_components": str(self.n_components),
             "unit_norm": json.dumps(self.unit_norm),
             "label_names": json.dumps(list(self.label_names)),
+            "reject": json.dumps(self.reject),
         }
 
     @classmethod
@@ -77,6 +81,9 @@ class OnnxModelInfo:
             names = json.loads(props["label_names"])
             unit_norm = json.loads(props["unit_norm"])
             n_components = int(props["n_components"])
+            reject = json.loads(props.get("reject", "false"))
+            if not isinstance(reject, bool):
+                raise ValueError(f"reject {reject!r} is not a bool")
             if kind not in KINDS:
                 raise ValueError(f"kind {kind!r} is not one of {KINDS}")
             if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(v, int) for v in shape)):
@@ -94,4 +101,5 @@ class OnnxModelInfo:
             unit_norm=unit_norm,
             label_names=tuple(names),
             module=props.get("module", ""),
+            reject=reject,
         )

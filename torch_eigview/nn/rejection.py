@@ -34,26 +34,26 @@ NOT_CALIBRATED = (
 )
 
 
-def rejection_score(dffs: torch.Tensor, difs: torch.Tensor, thresholds: torch.Tensor) -> torch.Tensor:
+def rejection_score(dffs: torch.Tensor, difs: torch.Tensor, inverse: torch.Tensor) -> torch.Tensor:
     """How far views lie past the rejection thresholds: a view is known when its score is <= 1.
 
-    ``max(dffs / t_dffs, difs / t_difs)``; an infinite threshold leaves its score out (its
-    ratio is 0). Export-friendly: no data-dependent branch.
+    ``max(dffs / t_dffs, difs / t_difs)``, as products with the reciprocals so that an
+    infinite threshold (reciprocal 0) leaves its score out and an exported graph holds
+    finite constants only. Export-friendly: no data-dependent branch.
 
     Args:
         dffs: (B,) distances from feature space.
         difs: (B,) distances to the nearest gallery view.
-        thresholds: (2,) ``(t_dffs, t_difs)``, positive or infinite.
+        inverse: (2,) ``(1 / t_dffs, 1 / t_difs)``, each >= 0.
 
     Returns:
         (B,) scores in units of the thresholds.
 
     Example:
-        >>> inf = float("inf")
-        >>> rejection_score(torch.tensor([0.5, 0.1]), torch.tensor([0.2, 0.6]), torch.tensor([inf, 0.4]))
+        >>> rejection_score(torch.tensor([0.5, 0.1]), torch.tensor([0.2, 0.6]), torch.tensor([0.0, 2.5]))
         tensor([0.5000, 1.5000])
     """
-    return torch.maximum(dffs / thresholds[0], difs / thresholds[1])
+    return torch.maximum(dffs * inverse[0], difs * inverse[1])
 
 
 def distance_from_feature_space(v: torch.Tensor, mean: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
@@ -125,4 +125,4 @@ def thresholded_score(
         dffs = dffs_of(projection, x, z)
     else:
         dffs = torch.zeros_like(difs)
-    return rejection_score(dffs, difs, thresholds)
+    return rejection_score(dffs, difs, 1 / thresholds)
