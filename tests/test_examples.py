@@ -35,6 +35,7 @@ def test_script_imports(path: Path) -> None:
 
 
 COIL_EXAMPLES = [
+    "reject_unknown",
     "coil20_recognition",
     "full_circle",
     "kernel_pca",
