@@ -165,6 +165,7 @@ def save_recognizer(
         "labels": recognizer.labels.detach().cpu(),
         "poses": recognizer.poses.detach().cpu(),
         "label_names": recognizer.label_names,
+        "reject_thresholds": recognizer.reject_thresholds.detach().cpu(),
         "metadata": meta,
     }
     _write(path, payload)
@@ -190,8 +191,15 @@ def load_recognizer(path: str | os.PathLike[str]) -> tuple[NearestNeighborRecogn
             tuple(shape) if shape is not None else None,
             unit_norm=bool(payload["unit_norm"]),
         )
+        # Files written before rejection existed have no thresholds: (0,) means none too.
+        thresholds = payload.get("reject_thresholds")
         recognizer = NearestNeighborRecognizer(
-            projection, payload["codes"], payload["labels"], payload["poses"], payload["label_names"]
+            projection,
+            payload["codes"],
+            payload["labels"],
+            payload["poses"],
+            payload["label_names"],
+            thresholds if thresholds is not None and thresholds.numel() else None,
         )
         return recognizer, dict(payload["metadata"])
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

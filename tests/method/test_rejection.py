@@ -1,0 +1,106 @@
+"""Tests for the rejection of unknown objects: calibration, the recognizer's thresholds as
+buffers (state_dict, checkpoint), ONNX's ``known`` against torch's, ``eigview predict
+--reject``, and COIL-20 with unknown objects."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from torch_eigview.datasets import OrthographicCamera, make_object, render_views
+from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
+from torch_eigview.method import FewViewEigenspace
+from torch_eigview.method.rejection import calibrate_rejection
+from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.nn.recognition import NearestNeighborRecognizer
+
+CAMERA = OrthographicCamera(32)
+KNOWN = ("ellipsoid", "egg")
+TEST_POSES = [-15.0, -7.0, 3.0, 14.0, 22.0]
+OBJECTS = {name: make_object(name) for name in KNOWN}  # one texture each for seeds and tests
+
+
+@pytest.fixture(scope="module")
+def fitted() -> FewViewEigenspace:
+    seeds = torch.stack([render_views(OBJECTS[name], [0.0, 10.0], CAMERA) for name in KNOWN])
+    est = FewViewEigenspace(8, reject_rate=0.05, reject_poses=(-25.0, 25.0, 2.5))
+    return est.fit(seeds, [0.0, 10.0], labels=[3, 5])
+
+
+def test_threshold_is_the_quantile_of_held_out_scores() -> None:
+    proj = EigenProjection(torch.zeros(3), torch.eye(3)[:2])
+    rec = NearestNeighborRecognizer.from_views(proj, torch.eye(3)[:2], torch.tensor([0, 1]), torch.zeros(2))
+    held = torch.tensor([[1.0, 0.1 * i, 0.0] for i in range(1, 11)])  # DIFS 0.1 .. 1.0
+    thresholds = calibrate_rejection(rec, held, reject_rate=0.2)
+    assert thresholds[0] == float("inf")
+    assert thresholds[1] == pytest.approx(torch.quantile(torch.linspace(0.1, 1.0, 10), 0.8).item())
+    known = rec.predict(held, reject=True).known
+    assert known is not None and known.tolist() == [True] * 8 + [False] * 2
+    both = calibrate_rejection(rec, held + torch.tensor([0.0, 0.0, 0.3]), reject_rate=0.2, score="both")
+    assert torch.isfinite(both).all()
+
+
+def test_bad_input_names_the_argument(fitted: FewViewEigenspace) -> None:
+    plain = FewViewEigenspace(2, synth=None).fit(torch.rand(2, 2, 1, 8, 8), [0.0, 10.0])
+    with pytest.raises(ValueError, match="reject=True needs rejection thresholds"):
+        plain.predict(torch.rand(1, 1, 8, 8), reject=True)
+    with pytest.raises(ValueError, match=r"reject_rate=1.5 must be a fraction in \(0, 1\)"):
+        FewViewEigenspace(8, reject_rate=1.5).fit(torch.rand(2, 2, 1, 8, 8), [0.0, 10.0])
+    with pytest.raises(ValueError, match="reject_score='x' must be one of"):
+        FewViewEigenspace(8, reject_rate=0.05, reject_score="x").fit(torch.rand(2, 2, 1, 8, 8), [0.0, 10.0])
+    with pytest.raises(ValueError, match=r"reject_rate=0\.05 calibrates on synthesized views"):
+        FewViewEigenspace(8, synth=None, reject_rate=0.05).fit(torch.rand(2, 2, 1, 8, 8), [0.0, 10.0])
+    rec = fitted.recognizer_
+    with pytest.raises(ValueError, match="gallery views"):  # gallery views have DIFS 0
+        calibrate_rejection(rec, rec.projection.reconstruct(rec.codes[:1]).clone(), 0.05)
+    with pytest.raises(ValueError, match="reject_thresholds must be"):
+        rec.set_rejection(torch.tensor([0.0, 1.0]))
+
+
+def test_thresholds_are_buffers_that_round_trip(fitted: FewViewEigenspace, tmp_path: Path) -> None:
+    rec = fitted.recognizer_
+    views = torch.rand(5, 1, 32, 32, generator=torch.Generator().manual_seed(1))
+    want = rec.predict(views, reject=True).known
+    fresh = NearestNeighborRecognizer(rec.projection, rec.codes, rec.labels, rec.poses)
+    assert not fresh.rejects
+    fresh.load_state_dict(rec.state_dict())
+    assert torch.equal(fresh.reject_thresholds, rec.reject_thresholds)
+    assert torch.equal(fresh.predict(views, reject=True).known, want)  # type: ignore[arg-type]
+    save_recognizer(tmp_path / "m.pt", rec)
+    loaded, _ = load_recognizer(tmp_path / "m.pt")
+    assert torch.equal(loaded.reject_thresholds, rec.reject_thresholds)
+
+
+def test_onnx_known_equals_torch(fitted: FewViewEigenspace, tmp_path: Path) -> None:
+    onnxruntime = pytest.importorskip("onnxruntime")
+    from torch_eigview.io.onnx import export_recognizer
+
+    rec = fitted.recognizer_
+    for thresholds in (rec.reject_thresholds.clone(), torch.tensor([0.3, 0.2])):
+        rec.set_rejection(thresholds)
+        path = tmp_path / "rec.onnx"
+        assert export_recognizer(rec, path).reject
+        known_views = torch.cat([render_views(OBJECTS[name], TEST_POSES, CAMERA) for name in KNOWN])
+        views = torch.cat([known_views, torch.rand(5, 1, 32, 32, generator=torch.Generator().manual_seed(2))])
+        got = onnxruntime.InferenceSession(str(path)).run(None, {"images": views.numpy()})
+        want = rec.predict(views, reject=True).known
+        assert want is not None and got[3].dtype == bool
+        assert got[3].tolist() == want.tolist()
+        assert 0 < int(want.sum()) < len(views)  # both answers occur
+
+
+@pytest.mark.slow
+def test_coil_unknown_objects_are_rejected(folder: CoilFolder) -> None:
+    """COIL-20, objects 1-3 known (seeds at 0 and 10), objects 4-6 unknown, poses -45..45."""
+    known, unknown = [1, 2, 3], [4, 5, 6]
+    seeds = torch.stack([folder.images(o, [0.0, 10.0]) for o in known])
+    est = FewViewEigenspace(15, reject_rate=0.05).fit(seeds, [0.0, 10.0], labels=known)
+    poses = [float(p) for p in range(-45, 46, 5)]
+    known_out = est.predict(torch.cat([folder.images(o, poses) for o in known]), reject=True).known
+    unknown_out = est.predict(torch.cat([folder.images(o, poses) for o in unknown]), reject=True).known
+    assert known_out is not None and unknown_out is not None
+    assert known_out.float().mean() >= 0.9
+    assert unknown_out.float().mean() <= 0.6  # objects 4-6 resemble 1-3 more than 11-20 do
