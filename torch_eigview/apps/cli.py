@@ -72,6 +72,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
+    synth.add_argument(
+        "--background",
+        choices=("black", "textured"),
+        default="black",
+        help="render on black (the paper's) or on a coloured, textured backdrop and ground",
+    )
+    synth.add_argument(
+        "--masks",
+        choices=("given", "estimated"),
+        default="given",
+        help="with --background textured: the renderer's exact masks or masks estimated from the image border",
+    )
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
     add_quiet(synth)
     add_threads(synth)
@@ -147,6 +159,8 @@ def _run_synth(args: argparse.Namespace) -> int:
         correspondences=args.correspondences,
         shapes=shapes,
         progress=progress_bar(args.quiet, f"synth {args.camera}", "run"),
+        background=args.background,
+        masks=args.masks,
     )
     if args.json:
         write_json(args.json, record, default=str)

@@ -200,7 +200,9 @@ class BackgroundModel:
         """Per image, its background colours with their tolerances."""
         b, c, h, w = images.shape
         if 2 * self.border >= min(h, w):
-            raise ValueError(f"border={self.border} must be less than half the image side min(H, W)={min(h, w)}")
+            raise ValueError(
+                f"border={self.border} must be less than half the image side min(H, W)={min(h, w)}"
+            )
         pixels = border_pixels(images, self.border)
         if self.background is None:
             found = [_border_colours(p, self.max_colours) for p in pixels]
@@ -208,7 +210,9 @@ class BackgroundModel:
                 return found
             return [[(col, float(self.tolerance)) for col, _ in cols] for cols in found]
         if len(self.background) != c:
-            raise ValueError(f"background={self.background!r} must hold C={c} values, one per channel of images")
+            raise ValueError(
+                f"background={self.background!r} must hold C={c} values, one per channel of images"
+            )
         colour = images.new_tensor(self.background)
         if self.tolerance is not None:
             return [[(colour, float(self.tolerance))]] * b
