@@ -72,18 +72,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
-    synth.add_argument(
-        "--background",
-        choices=("black", "textured"),
-        default="black",
-        help="render on black (the paper's) or on a coloured, textured backdrop and ground",
-    )
-    synth.add_argument(
-        "--masks",
-        choices=("given", "estimated"),
-        default="given",
-        help="with --background textured: the renderer's exact masks or masks estimated from the image border",
-    )
+    for flag, choices, what in (
+        (
+            "--background",
+            ("black", "textured"),
+            "black (the paper's) or a coloured, textured backdrop and ground",
+        ),
+        (
+            "--masks",
+            ("given", "estimated"),
+            "textured: the renderer's masks or ones estimated from the border",
+        ),
+    ):
+        synth.add_argument(flag, choices=choices, default=choices[0], help=f"default {choices[0]}; {what}")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
     add_quiet(synth)
     add_threads(synth)

@@ -209,8 +209,8 @@ def _camera_gallery(
         seeds = scene.views(name, seed_angles)
         corr = _pair_correspondence(scene, name, alpha, first + n * alpha, correspondences)
         opts = SYNTHETIC_OPTIONS
-        masks = seed_foreground(seeds, scene.foreground(name, seed_angles), opts.background)
-        masks = masks if opts.silhouette else None
+        fg = seed_foreground(seeds, scene.foreground(name, seed_angles), opts.background)
+        masks = fg if opts.silhouette else None
         views = warp(
             seeds[0],
             seeds[1],
