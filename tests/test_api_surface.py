@@ -113,6 +113,8 @@ SUBPACKAGES = {
     ],
     "datasets": [
         "AffineCamera",
+        "Backdrop",
+        "BackgroundModel",
         "CAMERAS",
         "CoilFolder",
         "DATA_ENV",
@@ -135,6 +137,7 @@ SUBPACKAGES = {
         "render",
         "render_views",
         "seen_error",
+        "set_background",
         "view_correspondence",
     ],
 }

@@ -46,7 +46,7 @@ from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
 from torch_eigview.warp.base import BLENDS
-from torch_eigview.warp.normalize import foreground_mask, normalize_extent
+from torch_eigview.warp.normalize import foreground_mask, normalize_extent, seed_foreground
 from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
@@ -100,10 +100,8 @@ class SynthesisOptions:
             (``background``) enter a synthesized pixel, renormalized, and a pixel less
             than half covered by them is background (``NovelViewWarp.apply_maps`` with
             ``masks``); off, a silhouette pixel mixes object and background. The mask is
-            a brightness threshold: object pixels darker than ``background`` count as
-            background too (they come out 0 or take their bright neighbours' values), so
-            use it where the background is darker than every object pixel (the
-            synthetic renders: exactly 0).
+            ``synthesize_views``'s ``masks``, else the ``background`` threshold (then
+            object pixels darker than it count as background).
     """
 
     flow: str = "tvl1"
@@ -263,7 +261,10 @@ def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[
 
 
 def pair_geometry(
-    seeds: torch.Tensor, alpha: float | Sequence[float], options: SynthesisOptions | None = None
+    seeds: torch.Tensor,
+    alpha: float | Sequence[float],
+    options: SynthesisOptions | None = None,
+    masks: torch.Tensor | None = None,
 ) -> list[PairGeometry]:
     """Correspondences (and the elevation) of each consecutive seed pair.
 
@@ -274,12 +275,14 @@ def pair_geometry(
         seeds: (V, C, H, W) seed views at 0, α, …, (V − 1)·α.
         alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
         options: :class:`SynthesisOptions`.
+        masks: optional (V, H, W) bool seed masks, in place of the ``options.background`` threshold.
 
     Returns:
         V − 1 :class:`PairGeometry` records.
     """
     opts = options or SynthesisOptions()
     seeds, steps = check_seeds(seeds, alpha)
+    fg = seed_foreground(seeds, masks, opts.background)
     out = []
     for n in range(seeds.shape[0] - 1):
         t0 = time.perf_counter()
@@ -290,7 +293,7 @@ def pair_geometry(
         corr = estimate_correspondence(v1, v2, method=opts.flow, threshold=opts.threshold, **kwargs)
         elevation = opts.elevation
         if elevation == "auto":
-            elevation = _auto_elevation(corr, steps[n], foreground_mask(v1, opts.background), opts.center, n)
+            elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
         out.append(PairGeometry(corr, float(elevation), time.perf_counter() - t0))
     return out
 
@@ -331,6 +334,7 @@ def synthesize_views(
     thetas: object,
     options: SynthesisOptions | None = None,
     geometry: list[PairGeometry] | None = None,
+    masks: torch.Tensor | None = None,
 ) -> SynthesizedViews:
     """Synthesizes the views of one object at ``thetas`` from seed views 0, α, 2α, ….
 
@@ -345,6 +349,10 @@ def synthesize_views(
         thetas: (T,) novel angles in degrees from the first seed view.
         options: :class:`SynthesisOptions`.
         geometry: the result of :func:`pair_geometry` for these seeds, if already computed.
+        masks: optional (V, H, W) bool foreground masks of the seeds (a segmentation's or
+            :class:`~torch_eigview.datasets.background.BackgroundModel`'s, the seeds'
+            background already set to 0): they replace the ``options.background``
+            threshold in silhouette-aware sampling and size normalization.
 
     Returns:
         :class:`SynthesizedViews` with views in the order of ``thetas``.
@@ -359,8 +367,9 @@ def synthesize_views(
     starts = _seed_angles(steps)
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1
+    masks = None if masks is None else seed_foreground(seeds, masks, opts.background)
     if geometry is None:
-        geometry = pair_geometry(seeds, alpha, opts)
+        geometry = pair_geometry(seeds, alpha, opts, masks)
     elif len(geometry) != n_pairs:
         raise ValueError(f"geometry must hold one record per seed pair ({n_pairs}), got {len(geometry)}")
     pair = _pair_index(theta, steps)
@@ -376,15 +385,15 @@ def synthesize_views(
         )
         maps = warp.maps(geo.correspondence, theta[sel] - starts[n])
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
-        fg = foreground_mask(pair_seeds, opts.background) if opts.extent or opts.silhouette else None
-        masks = fg if opts.silhouette else None
-        if fg is not None and opts.extent:
+        fg = foreground_mask(pair_seeds, opts.background) if masks is None else masks[n : n + 2, None]
+        sil = fg if opts.silhouette else None
+        if opts.extent:
             # The foreground mask rides along as one more channel: one warp for both.
             channel = fg.to(seeds.dtype)[:, :, None]
-            warped = warp.apply_maps(maps, torch.cat([pair_seeds, channel], dim=2), masks)[0]
+            warped = warp.apply_maps(maps, torch.cat([pair_seeds, channel], dim=2), sil)[0]
             views = normalize_extent(warped[:, :-1], warped[:, -1] > 0.5)
         else:
-            views = warp.apply_maps(maps, pair_seeds, masks)[0]
+            views = warp.apply_maps(maps, pair_seeds, sil)[0]
         out[sel] = views
         seconds["synthesis"] += time.perf_counter() - t0
     return SynthesizedViews(out, theta, [g.elevation for g in geometry], seconds, pair)

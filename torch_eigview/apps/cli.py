@@ -72,6 +72,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")
+    for flag, choices, what in (
+        (
+            "--background",
+            ("black", "textured"),
+            "black (the paper's) or a coloured, textured backdrop and ground",
+        ),
+        (
+            "--masks",
+            ("given", "estimated"),
+            "textured: the renderer's masks or ones estimated from the border",
+        ),
+    ):
+        synth.add_argument(flag, choices=choices, default=choices[0], help=f"default {choices[0]}; {what}")
     synth.add_argument("--json", metavar="FILE", help="write the results as JSON")
     add_quiet(synth)
     add_threads(synth)
@@ -147,6 +160,8 @@ def _run_synth(args: argparse.Namespace) -> int:
         correspondences=args.correspondences,
         shapes=shapes,
         progress=progress_bar(args.quiet, f"synth {args.camera}", "run"),
+        background=args.background,
+        masks=args.masks,
     )
     if args.json:
         write_json(args.json, record, default=str)

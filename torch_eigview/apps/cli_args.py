@@ -151,8 +151,9 @@ def add_threads(parser: argparse.ArgumentParser) -> None:
         type=threads_arg,
         default=None,
         metavar="N",
-        help="torch intra-op threads (default 1: a second thread gains little here and spins "
-        "when another process keeps the cores busy)",
+        help="torch intra-op threads (default: 1, since a second thread gains little here and spins "
+        "when another process keeps the cores busy; a large eigen step takes the CPUs other "
+        "processes leave idle)",
     )
 
 

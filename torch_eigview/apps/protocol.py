@@ -30,6 +30,7 @@ from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
+from torch_eigview.scale.thread_policy import for_products
 
 __all__ = [
     "Score",
@@ -93,7 +94,9 @@ def fit_projection(
     c, h, w = views.shape[1:]
     x_fit = unit_rows(views) if unit_norm else views.flatten(1)
     if kernel is None:
-        space = Eigenspace(components).fit(x_fit)
+        n, p = x_fit.shape
+        with for_products(min(n, p) ** 2 * max(n, p)):  # the Gram or scatter product
+            space = Eigenspace(components).fit(x_fit)
         return EigenProjection(
             space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=unit_norm
         )

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import torch
 
 from torch_eigview.apps.protocol import angle_range
+from torch_eigview.check import check_choice
 from torch_eigview.datasets import (
     CAMERAS,
     SHAPES,
@@ -28,15 +29,18 @@ from torch_eigview.datasets import (
     render,
     seen_error,
 )
+from torch_eigview.datasets.backdrop import Backdrop
+from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.shapes import SyntheticObject, make_object
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.synthesis import PairGeometry, SynthesisOptions, pair_geometry, pair_of, synthesize_views
-from torch_eigview.warp.normalize import foreground_mask
+from torch_eigview.warp.normalize import seed_foreground
 from torch_eigview.warp.novel_view import NovelViewWarp
 from torch_eigview.warp.perspective import PerspectiveWarp
 
 __all__ = [
     "CORRESPONDENCES",
+    "MASKS",
     "SYNTHETIC_OPTIONS",
     "SyntheticScene",
     "camera_warp",
@@ -46,6 +50,9 @@ __all__ = [
 ]
 
 CORRESPONDENCES = ("flow", "exact", "rendered")
+#: Where the foreground of a view on a backdrop comes from: the renderer's exact masks or
+#: a :class:`~torch_eigview.datasets.background.BackgroundModel` estimated from the border.
+MASKS = ("given", "estimated")
 # Synthetic renders: no camera tilt and no size normalization (COIL's defaults), and
 # scikit-image's own TV-L1 settings (5 warps of 10 iterations; ``flow_options={}``) rather
 # than the 3 × 5 speed preset, which is tuned on COIL only: on these smooth textures
@@ -66,28 +73,63 @@ class SyntheticScene:
         shapes: object names (see :data:`~torch_eigview.datasets.shapes.SHAPES`).
         camera: the camera (orthographic by default; any :func:`default_camera`).
         seed: texture seed of every object.
+        backdrop: None for the black background, or the coloured, textured
+            :class:`~torch_eigview.datasets.backdrop.Backdrop` the objects are rendered on.
+            Each view's foreground (``masks``) then decides its pixels and its background
+            is set to 0, as a user's photographs are before synthesis; the objects are
+            gray, so the views keep one channel, which holds their intensity exactly.
+        masks: with a backdrop, ``"given"`` (the renderer's exact masks) or
+            ``"estimated"`` (:class:`~torch_eigview.datasets.background.BackgroundModel`).
     """
 
     shapes: Sequence[str] = SHAPES
     camera: AffineCamera | PerspectiveCamera = field(default_factory=lambda: OrthographicCamera(64))
     seed: int = 0
+    backdrop: Backdrop | None = None
+    masks: str = "given"
     _objects: dict[str, SyntheticObject] = field(default_factory=dict, repr=False)
-    _cache: dict[tuple[str, float], torch.Tensor] = field(default_factory=dict, repr=False)
+    _cache: dict[tuple[str, float], tuple[torch.Tensor, torch.Tensor]] = field(
+        default_factory=dict, repr=False
+    )
+
+    def __post_init__(self) -> None:
+        if self.backdrop is not None and not isinstance(self.backdrop, Backdrop):
+            raise TypeError(f"backdrop must be a Backdrop or None, got {type(self.backdrop).__name__}")
+        check_choice(self.masks, "masks", MASKS)
 
     def object(self, name: str) -> SyntheticObject:
         if name not in self._objects:
             self._objects[name] = make_object(name, self.seed)
         return self._objects[name]
 
-    def views(self, name: str, thetas: Sequence[float]) -> torch.Tensor:
-        """(T, 1, H, W) rendered views of object ``name`` at ``thetas`` (degrees)."""
+    def _render(self, name: str, theta: float) -> tuple[torch.Tensor, torch.Tensor]:
+        """The (1, H, W) view and (H, W) foreground at ``theta``, background 0."""
+        r = render(self.object(name), theta, self.camera, backdrop=self.backdrop)
+        if self.backdrop is None:
+            return r.image, r.mask
+        given = r.mask[None, None] if self.masks == "given" else None
+        view, mask = BackgroundModel().apply(r.image[None], given)
+        return view[0, :1], mask[0, 0]
+
+    def _cached(self, name: str, thetas: Sequence[float]) -> list[tuple[torch.Tensor, torch.Tensor]]:
         out = []
         for t in thetas:
             key = (name, round(float(t), 9))
             if key not in self._cache:
-                self._cache[key] = render(self.object(name), float(t), self.camera).image
+                self._cache[key] = self._render(name, float(t))
             out.append(self._cache[key])
-        return torch.stack(out)
+        return out
+
+    def views(self, name: str, thetas: Sequence[float]) -> torch.Tensor:
+        """(T, 1, H, W) rendered views of object ``name`` at ``thetas`` (degrees)."""
+        return torch.stack([view for view, _ in self._cached(name, thetas)])
+
+    def foreground(self, name: str, thetas: Sequence[float]) -> torch.Tensor | None:
+        """(T, H, W) bool foreground of the views at ``thetas``: None without a backdrop
+        (the synthesis then thresholds the black background, as before)."""
+        if self.backdrop is None:
+            return None
+        return torch.stack([mask for _, mask in self._cached(name, thetas)])
 
 
 def default_camera(name: str, size: int = 64) -> AffineCamera | PerspectiveCamera:
@@ -163,10 +205,12 @@ def _camera_gallery(
         sel = (pair == n).nonzero().flatten().tolist()
         if not sel:
             continue
-        seeds = scene.views(name, [first + n * alpha, first + (n + 1) * alpha])
+        seed_angles = [first + n * alpha, first + (n + 1) * alpha]
+        seeds = scene.views(name, seed_angles)
         corr = _pair_correspondence(scene, name, alpha, first + n * alpha, correspondences)
         opts = SYNTHETIC_OPTIONS
-        masks = foreground_mask(seeds, opts.background) if opts.silhouette else None
+        fg = seed_foreground(seeds, scene.foreground(name, seed_angles), opts.background)
+        masks = fg if opts.silhouette else None
         views = warp(
             seeds[0],
             seeds[1],
@@ -248,7 +292,8 @@ def synthetic_gallery(
         return scene.views(name, thetas), thetas
     if not _is_plain_orthographic(scene.camera):
         return _camera_gallery(scene, name, alpha, first, n_views, thetas, correspondences), thetas
-    seeds = scene.views(name, [first + n * alpha for n in range(n_views)])
+    seed_angles = [first + n * alpha for n in range(n_views)]
+    seeds = scene.views(name, seed_angles)
     geometry = None
     if correspondences == "exact":
         obj, camera = scene.object(name), scene.camera
@@ -257,5 +302,8 @@ def synthetic_gallery(
             PairGeometry(exact_correspondence(obj, alpha, camera, theta_1=first + n * alpha), 0.0, 0.0)
             for n in range(n_views - 1)
         ]
-    out = synthesize_views(seeds, alpha, [t - first for t in thetas], SYNTHETIC_OPTIONS, geometry)
+    rel = [t - first for t in thetas]
+    out = synthesize_views(
+        seeds, alpha, rel, SYNTHETIC_OPTIONS, geometry, scene.foreground(name, seed_angles)
+    )
     return out.views, thetas

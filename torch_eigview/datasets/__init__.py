@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from torch_eigview.datasets.backdrop import Backdrop
+from torch_eigview.datasets.background import BackgroundModel, set_background
 from torch_eigview.datasets.cameras import (
     CAMERAS,
     AffineCamera,
@@ -33,6 +35,8 @@ __all__ = [
     "DATA_ENV",
     "SHAPES",
     "AffineCamera",
+    "Backdrop",
+    "BackgroundModel",
     "CoilFolder",
     "OrthographicCamera",
     "PerspectiveCamera",
@@ -52,5 +56,6 @@ __all__ = [
     "render",
     "render_views",
     "seen_error",
+    "set_background",
     "view_correspondence",
 ]

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from torch.utils.data import Dataset
 
 from torch_eigview.check import check_int
+from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
 from torch_eigview.io.images import read_image, to_unit_float
 
@@ -71,12 +72,18 @@ class ViewDataset(Dataset[dict[str, Any]]):
         channels: ``1`` (RGB to gray with the BT.709 weights), ``3`` (gray repeated) or
             None to keep each file's channels.
         dtype: Floating dtype of the images.
+        background: None to give the images as read, or a
+            :class:`~torch_eigview.datasets.background.BackgroundModel`: then a view
+            without a mask (image or alpha) gets the model's estimated mask, and every
+            image's background is set to the model's ``fill`` (kept when None), after
+            resizing.
 
     Raises:
         TypeError: A wrong type of argument.
         ValueError: ``size`` or ``channels`` is out of range. Reading an item raises
             ValueError naming the manifest line and the file when the image or mask cannot
-            be read or the mask's size differs from the image's.
+            be read, the mask's size differs from the image's, or (with ``background``) a
+            mask is all background or the background colour leaves no object.
     """
 
     def __init__(
@@ -86,6 +93,7 @@ class ViewDataset(Dataset[dict[str, Any]]):
         *,
         channels: int | None = None,
         dtype: torch.dtype = torch.float32,
+        background: BackgroundModel | None = None,
     ) -> None:
         if not isinstance(manifest, ViewManifest):
             raise TypeError(f"manifest must be a ViewManifest, got {type(manifest).__name__}")
@@ -93,6 +101,9 @@ class ViewDataset(Dataset[dict[str, Any]]):
             raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
         if channels is not None and check_int(channels, "channels") not in (1, 3):
             raise ValueError(f"channels must be 1, 3 or None, got {channels}")
+        if background is not None and not isinstance(background, BackgroundModel):
+            raise TypeError(f"background must be a BackgroundModel or None, got {type(background).__name__}")
+        self.background = background
         self.manifest = manifest
         self.size = _check_size(size)
         self.channels = channels
@@ -103,14 +114,21 @@ class ViewDataset(Dataset[dict[str, Any]]):
 
     def __repr__(self) -> str:
         return (
-            f"ViewDataset({self.manifest!r}, size={self.size}, channels={self.channels}, dtype={self.dtype})"
+            f"ViewDataset({self.manifest!r}, size={self.size}, channels={self.channels}, dtype={self.dtype}, "
+            f"background={self.background!r})"
         )
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         entry = self.manifest[index]
-        image, mask = self._read(entry)
+        image, mask, given = self._read(entry)
         if self.size is not None:
             image, mask = _resize(image, mask, self.size)
+        if self.background is not None:
+            try:
+                out, fg = self.background.apply(image[None], mask[None] if given else None)
+            except ValueError as exc:
+                raise ValueError(f"{entry.source}: {entry.path}: {exc}") from None
+            image, mask = out[0], fg[0]
         return {
             "image": image,
             "mask": mask,
@@ -119,8 +137,9 @@ class ViewDataset(Dataset[dict[str, Any]]):
             "elevation": float(entry.elevation),
         }
 
-    def _read(self, entry: ViewEntry) -> tuple[torch.Tensor, torch.Tensor]:
-        """The image ``(C, H, W)`` and mask ``(1, H, W)`` bool of ``entry``, at the file's size."""
+    def _read(self, entry: ViewEntry) -> tuple[torch.Tensor, torch.Tensor, bool]:
+        """The image ``(C, H, W)`` and mask ``(1, H, W)`` bool of ``entry``, at the file's size,
+        and whether the mask was given (a mask file or alpha) rather than all True."""
         try:
             arr = read_image(entry.path, keep_alpha=True)
             alpha = arr[-1:] if arr.shape[0] in (2, 4) else None
@@ -145,4 +164,5 @@ class ViewDataset(Dataset[dict[str, Any]]):
         elif self.channels == 1 and image.shape[0] == 3:
             weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
             image = (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
-        return image, torch.from_numpy(np.ascontiguousarray(mask))
+        given = entry.mask is not None or alpha is not None
+        return image, torch.from_numpy(np.ascontiguousarray(mask)), given

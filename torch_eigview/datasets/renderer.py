@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import torch
 
 from torch_eigview.check import check_number
+from torch_eigview.datasets.backdrop import Backdrop
 from torch_eigview.datasets.cameras import GEOMETRY_DTYPE, Camera, check_camera
 from torch_eigview.datasets.shapes import SyntheticObject
 from torch_eigview.geometry.pose import rotation_y
@@ -95,7 +96,8 @@ class Render:
     """One rendered view.
 
     Attributes:
-        image: (1, H, W) intensity in [0, 1], 0 on the background.
+        image: (1, H, W) intensity in [0, 1], 0 on the background; with a backdrop
+            (3, H, W) RGB, the object's gray intensity in every channel.
         depth: (H, W) depth along the viewing direction, +inf on the background.
         mask: (H, W) bool foreground.
         points: (H, W, 3) object-frame surface point of each pixel, NaN on the background.
@@ -131,7 +133,12 @@ def surface_points(
 
 
 def render(
-    obj: SyntheticObject, theta: float, camera: Camera, *, dtype: torch.dtype = torch.float32
+    obj: SyntheticObject,
+    theta: float,
+    camera: Camera,
+    *,
+    dtype: torch.dtype = torch.float32,
+    backdrop: Backdrop | None = None,
 ) -> Render:
     """Renders ``obj`` turned by ``theta`` degrees about its vertical axis.
 
@@ -142,9 +149,12 @@ def render(
             (:func:`~torch_eigview.datasets.cameras.OrthographicCamera`) or
             :class:`~torch_eigview.datasets.cameras.PerspectiveCamera`.
         dtype: floating dtype of the returned tensors (geometry is computed in float64).
+        backdrop: None for the black background, or a
+            :class:`~torch_eigview.datasets.backdrop.Backdrop` behind and under the object
+            (then the image is RGB); the mask is the object's either way.
 
     Returns:
-        :class:`Render` with (1, H, W) image, (H, W) depth and mask, (H, W, 3) points.
+        :class:`Render` with (1, H, W) (or (3, H, W)) image, (H, W) depth and mask, (H, W, 3) points.
 
     Raises:
         ValueError: ``theta`` is not finite, or a perspective camera is inside the object.
@@ -159,14 +169,27 @@ def render(
     points, depth, mask = surface_points(obj, theta, cam, x, y)
     image = torch.zeros(cam.height, cam.width, dtype=GEOMETRY_DTYPE)
     image[mask] = obj.intensity(points[mask]).clamp(0, 1)
-    return Render(image[None].to(dtype), depth.to(dtype), mask, points.to(dtype), theta)
+    if backdrop is None:
+        return Render(image[None].to(dtype), depth.to(dtype), mask, points.to(dtype), theta)
+    if not isinstance(backdrop, Backdrop):
+        raise TypeError(f"backdrop must be a Backdrop or None, got {type(backdrop).__name__}")
+    rgb = image[None].repeat(3, 1, 1)
+    origin, direction = cam.rays(x[~mask], y[~mask])
+    rgb[:, ~mask] = backdrop.shade(origin, direction).T
+    return Render(rgb.to(dtype), depth.to(dtype), mask, points.to(dtype), theta)
 
 
 def render_views(
-    obj: SyntheticObject, thetas: object, camera: Camera, *, dtype: torch.dtype = torch.float32
+    obj: SyntheticObject,
+    thetas: object,
+    camera: Camera,
+    *,
+    dtype: torch.dtype = torch.float32,
+    backdrop: Backdrop | None = None,
 ) -> torch.Tensor:
-    """(T, 1, H, W) images of ``obj`` at the angles ``thetas`` (degrees, (T,) or a list)."""
+    """(T, 1, H, W) images of ``obj`` at the angles ``thetas`` (degrees, (T,) or a list);
+    (T, 3, H, W) with a ``backdrop`` (see :func:`render`)."""
     angles = [float(t) for t in torch.as_tensor(thetas, dtype=GEOMETRY_DTYPE).reshape(-1)]
     if not angles:
         raise ValueError("thetas must hold at least one angle, got none")
-    return torch.stack([render(obj, t, camera, dtype=dtype).image for t in angles])
+    return torch.stack([render(obj, t, camera, dtype=dtype, backdrop=backdrop).image for t in angles])

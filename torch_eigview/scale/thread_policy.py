@@ -15,21 +15,47 @@ script may do the same::
 
     with threads(1):
         views = synthesize_views(seeds, 5.0, thetas)
+
+Large matrix products are the exception: a Gram matrix of thousands of views runs about
+twice as fast on two idle cores, and collapses like the rest beside a busy neighbour. The
+commands run their eigen step with :func:`product_threads`, which counts the CPUs that
+other processes leave idle (sampled for a tenth of a second just before the step) and
+uses that many threads, at least one.
 """
 
 from __future__ import annotations
 
+import os
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from contextvars import ContextVar
+from pathlib import Path
 
 import torch
 
-from torch_eigview.check import check_int
+from torch_eigview.check import check_int, check_positive
 
-__all__ = ["THREADS_DEFAULT", "default_threads", "resolve_threads", "threads"]
+__all__ = [
+    "PRODUCT_FLOPS",
+    "THREADS_DEFAULT",
+    "default_threads",
+    "for_products",
+    "idle_cpus",
+    "product_threads",
+    "resolve_threads",
+    "threads",
+]
 
 #: Intra-op threads of a command unless ``--threads`` says otherwise (see the module).
 THREADS_DEFAULT = 1
+
+#: Products below this many floating-point operations (about a second on one core) run
+#: with the policy's one thread; sampling the idle CPUs costs a tenth of a second.
+PRODUCT_FLOPS = 1e11
+
+# True inside threads(None), the commands' policy; an explicit count turns it off.
+_POLICY: ContextVar[bool] = ContextVar("torch_eigview_thread_policy", default=False)
 
 
 def default_threads() -> int:
@@ -43,6 +69,94 @@ def resolve_threads(n: int | None) -> int:
     if n is None:
         return default_threads()
     return check_int(n, "threads", minimum=1)
+
+
+def _allowed_cpus() -> list[int]:
+    if hasattr(os, "sched_getaffinity"):
+        return sorted(os.sched_getaffinity(0))
+    return list(range(os.cpu_count() or 1))  # pragma: no cover - macOS / Windows
+
+
+def _idle_ticks(stat: Path, cpus: list[int]) -> tuple[int, int] | None:
+    """(idle, total) clock ticks summed over ``cpus`` from a ``/proc/stat`` file, or None."""
+    try:
+        lines = stat.read_text().splitlines()
+    except OSError:
+        return None
+    wanted = {f"cpu{i}" for i in cpus}
+    idle = total = 0
+    for line in lines:
+        fields = line.split()
+        if fields and fields[0] in wanted:
+            ticks = [int(v) for v in fields[1:9]]  # user nice system idle iowait irq softirq steal
+            idle += ticks[3] + ticks[4]
+            total += sum(ticks)
+    return (idle, total) if total else None
+
+
+def idle_cpus(interval: float = 0.1, *, stat: str | os.PathLike[str] = "/proc/stat") -> float:
+    """CPUs of this process's affinity mask that stayed idle over the next ``interval`` seconds.
+
+    The calling thread sleeps while it samples, so the figure is what the other processes
+    (and this process's other threads) leave free. Where the kernel has no ``/proc/stat``
+    (macOS, Windows), every allowed CPU counts as idle.
+
+    Args:
+        interval: sampling time in seconds, > 0.
+        stat: the kernel's CPU statistics file (a parameter for tests).
+
+    Returns:
+        A float in [0, number of allowed CPUs].
+    """
+    check_positive(interval, "interval")
+    cpus = _allowed_cpus()
+    first = _idle_ticks(Path(stat), cpus)
+    if first is None:
+        return float(len(cpus))
+    time.sleep(interval)
+    second = _idle_ticks(Path(stat), cpus)
+    if second is None or second[1] <= first[1]:
+        return float(len(cpus))
+    return len(cpus) * (second[0] - first[0]) / (second[1] - first[1])
+
+
+def product_threads(interval: float = 0.1) -> int:
+    """Threads for a large matrix product: the CPUs other processes leave idle.
+
+    Args:
+        interval: sampling time of :func:`idle_cpus` in seconds.
+
+    Returns:
+        The idle CPUs rounded down after adding 0.3 (a CPU 70 % idle counts), at least 1
+        and at most the CPUs this process may use.
+    """
+    idle = idle_cpus(interval)
+    return max(1, min(len(_allowed_cpus()), int(idle + 0.3)))
+
+
+@contextmanager
+def for_products(flops: float) -> Iterator[int]:
+    """Runs a matrix-product step of about ``flops`` operations under the commands' policy.
+
+    Inside :func:`threads` with no count (the commands' default policy) and for a product
+    of at least :data:`PRODUCT_FLOPS`, the body runs with :func:`product_threads`; with an
+    explicit count (``--threads N``), outside any policy (library use), or for a smaller
+    product (where sampling the CPUs would cost more than it gains), the thread settings
+    stay as they are.
+
+    Yields:
+        The number of threads in force.
+
+    Example:
+        >>> with threads(1), for_products(1e6) as n:  # small: one thread, no sampling
+        ...     n
+        1
+    """
+    if not _POLICY.get() or flops < PRODUCT_FLOPS:
+        yield torch.get_num_threads()
+        return
+    with threads(product_threads()) as n:
+        yield n
 
 
 @contextmanager
@@ -80,7 +194,9 @@ def threads(n: int | None = None, *, blas: bool = True) -> Iterator[int]:
             else:
                 stack.enter_context(threadpool_limits(limits=count))
         torch.set_num_threads(count)
+        token = _POLICY.set(n is None)
         try:
             yield count
         finally:
+            _POLICY.reset(token)
             torch.set_num_threads(previous)

@@ -14,7 +14,7 @@ from kornia.geometry.transform import remap
 
 from torch_eigview.check import check_float_tensor, check_ndim
 
-__all__ = ["foreground_mask", "normalize_extent"]
+__all__ = ["foreground_mask", "normalize_extent", "seed_foreground"]
 
 
 def foreground_mask(images: torch.Tensor, threshold: float = 0.05) -> torch.Tensor:
@@ -29,6 +29,37 @@ def foreground_mask(images: torch.Tensor, threshold: float = 0.05) -> torch.Tens
     """
     check_float_tensor(images, "images")
     return images.mean(dim=-3) > threshold
+
+
+def seed_foreground(seeds: torch.Tensor, masks: object, threshold: float) -> torch.Tensor:
+    """The foreground of each seed view: its mask when given, else :func:`foreground_mask`.
+
+    A mask from a segmentation or a background model decides where a brightness
+    threshold could not (an object darker than ``threshold``, a background that is not
+    black); without one, the threshold keeps the behaviour of the black-background data.
+
+    Args:
+        seeds: (V, C, H, W) seed views.
+        masks: None, or (V, H, W) bool masks, True on the object.
+        threshold: intensity above which a pixel is foreground when ``masks`` is None.
+
+    Returns:
+        (V, H, W) bool.
+
+    Raises:
+        TypeError: ``masks`` is not a bool tensor.
+        ValueError: ``masks`` does not have shape (V, H, W).
+    """
+    if masks is None:
+        return foreground_mask(seeds, threshold)
+    if not isinstance(masks, torch.Tensor) or masks.dtype != torch.bool:
+        raise TypeError(f"masks must be None or a bool tensor (True on the object), got {masks!r:.80}")
+    want = (seeds.shape[0], *seeds.shape[2:])
+    if tuple(masks.shape) != want:
+        raise ValueError(
+            f"masks must have shape (V, H, W) = {want} to match the seeds, got {tuple(masks.shape)}"
+        )
+    return masks.to(seeds.device)
 
 
 def _first_last(any_along: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -1,0 +1,279 @@
+"""Foreground masks and a constant background: the background model of a set of views.
+
+With masks (a segmentation tool's, an RGBA image's alpha, a renderer's), the masks decide
+the foreground. Without, :class:`BackgroundModel` estimates them: the background colours
+are taken from the image border, where a turntable photograph shows the backdrop and the
+table and rarely the object. Each colour is the channel-wise median of the border pixels
+still unexplained (the first is the backdrop's, the second typically the table's or the
+cloth's), and its tolerance comes from the spread of the border pixels it explains, so a
+textured backdrop's own variation stays background. A pixel farther than every colour's
+tolerance is foreground; the mask is then cleaned: foreground specks smaller than
+``min_fraction`` of the image (backdrop texture that passed the tolerance) are dropped and
+background holes as small inside the object (object pixels of the backdrop's colour) are
+filled. Larger holes are kept: a cup's handle shows the backdrop through it.
+
+The rest of the pipeline (silhouette-aware sampling, size normalization, the extent
+channel, the eigenspace) assumes one constant background, black by default:
+:func:`set_background` puts it under every view, so the backdrop does not enter the
+eigenspace and synthesized views, warped from views already masked, carry the same.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from torch_eigview.check import check_finite, check_float_tensor, check_int, check_number, check_positive
+
+__all__ = ["BackgroundModel", "border_pixels", "check_masks", "set_background"]
+
+# Below this a tolerance would split 8-bit quantization noise (2/255 in three channels).
+_MIN_TOLERANCE = 0.02
+# The border share that a further background colour must explain; the rest is taken for
+# object pixels at the border.
+_MIN_COLOUR_SHARE = 0.05
+
+
+def check_masks(masks: object, images: torch.Tensor, name: str = "masks") -> torch.Tensor:
+    """``masks`` checked against ``images`` (B, C, H, W): (B, 1, H, W) bool, no mask empty.
+
+    Raises:
+        TypeError: ``masks`` is not a bool tensor.
+        ValueError: its shape is not (B, 1, H, W), or a mask is all background.
+    """
+    if not isinstance(masks, torch.Tensor) or masks.dtype != torch.bool:
+        what = f"tensor of dtype {masks.dtype}" if isinstance(masks, torch.Tensor) else type(masks).__name__
+        raise TypeError(f"{name} must be a bool tensor (True on the object), got a {what}")
+    b, _, h, w = images.shape
+    if tuple(masks.shape) != (b, 1, h, w):
+        raise ValueError(
+            f"{name} must have shape (B, 1, H, W) = {(b, 1, h, w)} to match the images, "
+            f"got {tuple(masks.shape)}"
+        )
+    empty = (~masks.flatten(1).any(dim=1)).nonzero().flatten().tolist()
+    if empty:
+        raise ValueError(
+            f"{name}[{empty[0]}] is all background (no True pixel; {len(empty)} such mask(s)): "
+            "a view must show its object"
+        )
+    return masks
+
+
+def _check_images(images: object) -> torch.Tensor:
+    images = check_float_tensor(images, "images")
+    if images.ndim != 4:
+        raise ValueError(f"images must have shape (B, C, H, W), got shape {tuple(images.shape)}")
+    check_finite(images, "images")
+    return images
+
+
+def set_background(images: torch.Tensor, masks: torch.Tensor, value: float = 0.0) -> torch.Tensor:
+    """``images`` with every background pixel set to ``value`` (all channels).
+
+    Args:
+        images: (B, C, H, W) views.
+        masks: (B, 1, H, W) bool, True on the object.
+        value: the constant background intensity.
+
+    Returns:
+        (B, C, H, W) views; the object's pixels are the input's, unchanged.
+
+    Example:
+        >>> x = torch.full((1, 3, 2, 2), 0.5)
+        >>> m = torch.tensor([[[[True, False], [False, False]]]])
+        >>> set_background(x, m)[0, 0].tolist()
+        [[0.5, 0.0], [0.0, 0.0]]
+    """
+    images = _check_images(images)
+    masks = check_masks(masks, images)
+    value = check_number(value, "value")
+    return torch.where(masks, images, images.new_tensor(value))
+
+
+def border_pixels(images: torch.Tensor, width: int) -> torch.Tensor:
+    """The pixels of each image's border of ``width`` pixels: (B, M, C), M = H·W − (H−2w)(W−2w)."""
+    _, c, h, w = images.shape
+    ring = torch.ones(h, w, dtype=torch.bool, device=images.device)
+    ring[width : h - width, width : w - width] = False
+    return images.permute(0, 2, 3, 1)[:, ring].reshape(images.shape[0], -1, c)
+
+
+def _tolerance(distances: torch.Tensor) -> float:
+    """The tolerance of one background colour from its border pixels' distances to it.
+
+    Twice their 95th percentile: the backdrop inside the frame reaches a little beyond
+    what its border sample shows, and an object pixel is nowhere near this close to a
+    backdrop colour unless it has that colour (then the hole filling takes it back).
+    """
+    return max(_MIN_TOLERANCE, 2.0 * float(distances.double().quantile(0.95)))
+
+
+def _border_colours(pixels: torch.Tensor, max_colours: int) -> list[tuple[torch.Tensor, float]]:
+    """Background colours of one image and their tolerances from its (M, C) border pixels."""
+    colours: list[tuple[torch.Tensor, float]] = []
+    left = pixels
+    while len(colours) < max_colours and left.shape[0] >= _MIN_COLOUR_SHARE * pixels.shape[0]:
+        colour = left.median(dim=0).values
+        dist = (left - colour).norm(dim=1)
+        # Its own pixels: within three median distances of it (the median colour is the
+        # majority's, so the median distance is the majority's spread).
+        own = dist <= max(3.0 * float(dist.median()), _MIN_TOLERANCE)
+        tol = _tolerance(dist[own])
+        colours.append((colour, tol))
+        left = left[dist > tol]
+    return colours
+
+
+def _clean(mask: np.ndarray, min_area: int) -> np.ndarray:
+    """Drops foreground components and fills background holes smaller than ``min_area``."""
+    labels, n = ndimage.label(mask)
+    if n:
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)
+        keep = sizes >= min_area
+        keep[0] = False
+        mask = keep[labels]
+    holes = ~mask & ndimage.binary_fill_holes(mask)
+    labels, n = ndimage.label(holes)
+    if n:
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)
+        fill = sizes < min_area
+        fill[0] = False
+        mask = mask | fill[labels]
+    return mask
+
+
+@dataclass(frozen=True)
+class BackgroundModel:
+    """How the foreground of a view is found and what its background becomes.
+
+    Args:
+        background: the background colour, one value per channel (e.g. ``(0.2, 0.4, 0.6)``),
+            or None to estimate the colours from each image's border.
+        tolerance: the largest distance (Euclidean over the channels, intensities in
+            [0, 1]) from a background colour that is still background, or None for one
+            from the border's spread.
+        border: width in pixels of the border the colours and tolerances are taken from.
+        max_colours: how many background colours the border may hold (backdrop and
+            table: 2); used when ``background`` is None.
+        min_fraction: foreground components and background holes smaller than this
+            fraction of the image are flipped (0 keeps the raw mask).
+        fill: the constant every background pixel is set to, or None to keep the background.
+
+    Example:
+        >>> x = torch.zeros(1, 3, 8, 8)
+        >>> x[..., 2:6, 3:6] = 0.8
+        >>> BackgroundModel().masks(x)[0, 0].sum().item()
+        12
+    """
+
+    background: Sequence[float] | None = None
+    tolerance: float | None = None
+    border: int = 2
+    max_colours: int = 2
+    min_fraction: float = 0.005
+    fill: float | None = 0.0
+
+    def __post_init__(self) -> None:
+        if self.background is not None:
+            if isinstance(self.background, str) or not isinstance(self.background, Sequence):
+                raise TypeError(f"background must be a sequence of numbers or None, got {self.background!r}")
+            values = tuple(check_number(v, "background") for v in self.background)
+            if not values or not all(0.0 <= v <= 1.0 for v in values):
+                raise ValueError(f"background={self.background!r} must hold one value in [0, 1] per channel")
+            object.__setattr__(self, "background", values)
+        if self.tolerance is not None:
+            check_positive(self.tolerance, "tolerance")
+        check_int(self.border, "border", minimum=1)
+        check_int(self.max_colours, "max_colours", minimum=1)
+        frac = check_number(self.min_fraction, "min_fraction")
+        if not 0.0 <= frac < 1.0:
+            raise ValueError(f"min_fraction={self.min_fraction!r} must lie in [0, 1)")
+        if self.fill is not None and not math.isfinite(check_number(self.fill, "fill")):
+            raise ValueError(f"fill={self.fill!r} must be a finite intensity or None")
+
+    def _colours(self, images: torch.Tensor) -> list[list[tuple[torch.Tensor, float]]]:
+        """Per image, its background colours with their tolerances."""
+        b, c, h, w = images.shape
+        if 2 * self.border >= min(h, w):
+            raise ValueError(
+                f"border={self.border} must be less than half the image side min(H, W)={min(h, w)}"
+            )
+        pixels = border_pixels(images, self.border)
+        if self.background is None:
+            found = [_border_colours(p, self.max_colours) for p in pixels]
+            if self.tolerance is None:
+                return found
+            return [[(col, float(self.tolerance)) for col, _ in cols] for cols in found]
+        if len(self.background) != c:
+            raise ValueError(
+                f"background={self.background!r} must hold C={c} values, one per channel of images"
+            )
+        colour = images.new_tensor(self.background)
+        if self.tolerance is not None:
+            return [[(colour, float(self.tolerance))]] * b
+        # The border pixels near the given colour: object pixels at the border do not widen it.
+        out = []
+        for p in pixels:
+            dist = (p - colour).norm(dim=1)
+            own = dist <= max(3.0 * float(dist.median()), _MIN_TOLERANCE)
+            out.append([(colour, _tolerance(dist[own]))])
+        return out
+
+    def masks(self, images: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
+        """The foreground masks of ``images``: ``masks`` when given (checked), else estimated.
+
+        Args:
+            images: (B, C, H, W) views in [0, 1].
+            masks: optional (B, 1, H, W) bool masks, True on the object.
+
+        Returns:
+            (B, 1, H, W) bool, True on the object.
+
+        Raises:
+            ValueError: a given mask has another size or is all background; the
+                background colour leaves no object in an image.
+        """
+        images = _check_images(images)
+        if masks is not None:
+            return check_masks(masks, images)
+        b, _, h, w = images.shape
+        min_area = math.ceil(self.min_fraction * h * w)
+        out = torch.zeros(b, 1, h, w, dtype=torch.bool)
+        for i, (image, colours) in enumerate(zip(images, self._colours(images), strict=True)):
+            near = torch.zeros(h, w, dtype=torch.bool, device=images.device)
+            for colour, tol in colours:
+                near |= (image - colour[:, None, None]).norm(dim=0) <= tol
+            mask = _clean((~near).cpu().numpy(), min_area)
+            if not mask.any():
+                described = ", ".join(
+                    f"({', '.join(f'{v:.3g}' for v in col.tolist())}) ± {tol:.3g}" for col, tol in colours
+                )
+                source = "given" if self.background is not None else "estimated from the border"
+                raise ValueError(
+                    f"background={described} ({source}) leaves no object in images[{i}]: every pixel "
+                    "is within the tolerance of a background colour (give background= or a smaller tolerance=)"
+                )
+            out[i, 0] = torch.from_numpy(mask)
+        return out.to(images.device)
+
+    def apply(
+        self, images: torch.Tensor, masks: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The views with their background set to ``fill`` (kept when None), and their masks.
+
+        Args:
+            images: (B, C, H, W) views in [0, 1].
+            masks: optional (B, 1, H, W) bool masks; estimated when None.
+
+        Returns:
+            ``(views, masks)``: (B, C, H, W) and (B, 1, H, W) bool.
+        """
+        fg = self.masks(images, masks)
+        if self.fill is None:
+            return images, fg
+        return set_background(images, fg, self.fill), fg
