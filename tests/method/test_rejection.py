@@ -4,6 +4,7 @@ buffers (state_dict, checkpoint), ONNX's ``known`` against torch's, ``eigview pr
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import pytest
@@ -16,18 +17,44 @@ from torch_eigview.method import FewViewEigenspace
 from torch_eigview.method.rejection import calibrate_rejection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
+from torch_eigview.synthesis import SynthesisOptions
 
 CAMERA = OrthographicCamera(32)
 KNOWN = ("ellipsoid", "egg")
 TEST_POSES = [-15.0, -7.0, 3.0, 14.0, 22.0]
 OBJECTS = {name: make_object(name) for name in KNOWN}  # one texture each for seeds and tests
+# The renderer's objects do not fill the frame: the gallery must not be size-normalized.
+OPTIONS = SynthesisOptions(extent=False)
+
+
+def _seeds() -> torch.Tensor:
+    return torch.stack([render_views(OBJECTS[name], [0.0, 10.0], CAMERA) for name in KNOWN])
 
 
 @pytest.fixture(scope="module")
 def fitted() -> FewViewEigenspace:
-    seeds = torch.stack([render_views(OBJECTS[name], [0.0, 10.0], CAMERA) for name in KNOWN])
-    est = FewViewEigenspace(8, reject_rate=0.05, reject_poses=(-25.0, 25.0, 2.5))
-    return est.fit(seeds, [0.0, 10.0], labels=[3, 5])
+    est = FewViewEigenspace(8, options=OPTIONS, reject_rate=0.05, reject_poses=(-25.0, 25.0, 2.5))
+    return est.fit(_seeds(), [0.0, 10.0], labels=[3, 5])
+
+
+def test_seed_views_are_known_at_their_own_pose(fitted: FewViewEigenspace) -> None:
+    """Regression: with a size-normalized gallery of views that are not, even the seed
+    views matched a view 20 degrees off and were rejected."""
+    out = fitted.predict(_seeds().flatten(0, 1), reject=True)
+    assert out.labels.tolist() == [3, 3, 5, 5]
+    assert out.poses.tolist() == [0.0, 10.0, 0.0, 10.0]
+    assert out.known is not None and bool(out.known.all())
+
+
+def test_size_normalizing_unnormalized_seeds_warns() -> None:
+    with pytest.warns(UserWarning, match=r"options.extent=True size-normalizes .* fills only"):
+        FewViewEigenspace(4, synth=(0.0, 10.0, 5.0)).fit(_seeds(), [0.0, 10.0])
+    full = torch.rand(2, 2, 1, 16, 16, generator=torch.Generator().manual_seed(0)) * 0.9 + 0.1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # a view that fills its frame passes
+        FewViewEigenspace(4, synth=(0.0, 10.0, 5.0), options=SynthesisOptions(elevation=0.0)).fit(
+            full, [0.0, 10.0]
+        )
 
 
 def test_threshold_is_the_quantile_of_held_out_scores() -> None:
@@ -54,8 +81,8 @@ def test_bad_input_names_the_argument(fitted: FewViewEigenspace) -> None:
     with pytest.raises(ValueError, match=r"reject_rate=0\.05 calibrates on synthesized views"):
         FewViewEigenspace(8, synth=None, reject_rate=0.05).fit(torch.rand(2, 2, 1, 8, 8), [0.0, 10.0])
     rec = fitted.recognizer_
-    with pytest.raises(ValueError, match="gallery views"):  # gallery views have DIFS 0
-        calibrate_rejection(rec, rec.projection.reconstruct(rec.codes[:1]).clone(), 0.05)
+    with pytest.raises(ValueError, match=r"rounding error of the distances.*gallery views"):
+        calibrate_rejection(rec, _seeds().flatten(0, 1), 0.05)  # seed views are gallery views
     with pytest.raises(ValueError, match="reject_thresholds must be"):
         rec.set_rejection(torch.tensor([0.0, 1.0]))
 

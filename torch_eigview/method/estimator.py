@@ -37,6 +37,7 @@ from torch_eigview.method.inputs import (
     check_synth,
     resolve_components,
     seed_steps,
+    warn_unnormalized_seeds,
     wrap_degrees,
 )
 from torch_eigview.method.rejection import REJECT_SCORES, calibrate_rejection, check_reject_rate
@@ -183,6 +184,8 @@ class FewViewEigenspace:
         objects = check_seeds(seeds)
         angles = check_angles(seed_angles, objects)
         names = check_labels(labels, len(objects))
+        if params.synth is not None:
+            warn_unnormalized_seeds(objects, params.options)
         self.elevations_: list[list[float]] = []
         views: list[torch.Tensor] = []
         label_list: list[int] = []

@@ -26,7 +26,7 @@ import torch
 from torch_eigview.check import check_choice, check_float_tensor, check_ndim, check_number
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
-__all__ = ["REJECT_SCORES", "calibrate_rejection", "check_reject_rate"]
+__all__ = ["REJECT_SCORES", "calibrate_rejection", "check_reject_rate", "distance_resolution"]
 
 REJECT_SCORES = ("difs", "dffs", "both")
 
@@ -37,6 +37,21 @@ def check_reject_rate(rate: object, name: str = "reject_rate") -> float:
     if not 0.0 < value < 1.0:
         raise ValueError(f"{name}={value!r} must be a fraction in (0, 1) of the known views to reject")
     return value
+
+
+def distance_resolution(codes: torch.Tensor) -> float:
+    """The rounding error of the recognizer's distances for gallery codes ``codes`` (G, k).
+
+    Both scores are square roots of a difference of squared norms (``|z|² − 2 z·c + |c|²``,
+    ``|v − mean|² − |z|²``), whose rounding error is a few ``eps·|c|²``; the distance of a
+    view to itself therefore comes out as large as ``sqrt(8 eps)·max|c|`` (measured on the
+    synthetic renderer in float32: 1e-4 for the seed views, which are gallery views). A
+    threshold at or below it cannot tell a held-out view from a gallery view.
+    """
+    if codes.numel() == 0:
+        return 0.0
+    scale = float(codes.detach().double().norm(dim=1).max())
+    return math.sqrt(8 * torch.finfo(codes.dtype).eps) * scale
 
 
 def calibrate_rejection(
@@ -66,7 +81,8 @@ def calibrate_rejection(
         TypeError: ``recognizer`` is not a :class:`NearestNeighborRecognizer`, or ``views``
             not a float tensor.
         ValueError: a bad ``reject_rate`` or ``score``; no views; non-finite scores; a
-            threshold of 0 (the views are gallery views: their DIFS is 0).
+            threshold within the distances' rounding error (:func:`distance_resolution`):
+            the views are gallery views, whose DIFS is 0.
 
     Example:
         >>> from torch_eigview.nn import EigenProjection
@@ -109,11 +125,13 @@ def calibrate_rejection(
             t_dffs, t_difs = scale * s_dffs, scale * s_difs
         else:
             t_dffs, t_difs = s_dffs, s_difs
-    if t_dffs <= 0 or t_difs <= 0:
+    floor = distance_resolution(recognizer.codes)
+    if t_dffs <= floor or t_difs <= floor:
         raise ValueError(
-            f"the calibrated thresholds (t_dffs={t_dffs:.3g}, t_difs={t_difs:.3g}) must be > 0: the "
-            f"views' {score} scores are 0 at the {q:.3g} quantile, so they are gallery views (or lie "
-            "in the eigenspace); calibrate on views held out from the gallery"
+            f"the calibrated thresholds (t_dffs={t_dffs:.3g}, t_difs={t_difs:.3g}) must exceed the "
+            f"rounding error of the distances ({floor:.3g}): the views' {score} scores are 0 to "
+            f"rounding at the {q:.3g} quantile, so they are gallery views (or lie in the "
+            "eigenspace); calibrate on views held out from the gallery"
         )
     thresholds = torch.tensor([t_dffs, t_difs], dtype=recognizer.codes.dtype, device=recognizer.codes.device)
     recognizer.set_rejection(thresholds)
