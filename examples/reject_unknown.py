@@ -40,7 +40,7 @@ def roc(known: torch.Tensor, unknown: torch.Tensor) -> list[dict[str, float]]:
     ]
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> dict[str, object]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--root", help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA)")
     parser.add_argument("--known", type=int, nargs="+", default=list(range(1, 11)), help="known objects")
@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"ROC: known rejected <= {target:.0%}: unknown rejected {best['unknown_rejected']:.1%}")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
+    return result
 
 
 if __name__ == "__main__":

@@ -75,3 +75,18 @@ def test_warp_augmentation(coil_root: Path) -> None:
     result = load("warp_augmentation").main(["--root", str(coil_root), "--quick"])
     assert result["identity_err"] < 1e-4
     assert result["worst_gap"] < 0.05
+
+
+@pytest.mark.coil
+@pytest.mark.slow
+def test_reject_unknown(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = load("reject_unknown").main(
+        ["--root", str(coil_root), "--known", "1", "2", "3", "--unknown", "11", "12"]
+    )
+    out = capsys.readouterr().out
+    assert "calibrated:" in out and out.count("ROC: known rejected <=") == 4
+    roc = result["roc"]
+    assert isinstance(roc, list) and roc[0]["unknown_rejected"] >= roc[-1]["unknown_rejected"] == 0.0
+    assert all(a["known_rejected"] >= b["known_rejected"] for a, b in zip(roc, roc[1:]))
+    assert result["n_known"] == 3 * 19 and result["n_unknown"] == 2 * 19
+    assert float(result["unknown_rejected"]) > float(result["known_rejected"])  # type: ignore[arg-type]

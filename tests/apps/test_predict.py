@@ -207,3 +207,39 @@ def test_many_images_in_batches(model: Path, images: list[str], capsys: pytest.C
     lines = out.splitlines()
     assert code == 0 and len(lines) == len(many)
     assert lines[:3] == lines[3:6] == lines[-3:]
+
+
+def test_reject_prints_unknown(
+    model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A recognizer with rejection thresholds: its gallery images are known, an image far
+    from every gallery view is "unknown"; a model without a ``known`` output is refused."""
+    gallery = rand(4, *SHAPE, dtype=torch.float32)
+    projection = Eigenspace(3).fit(gallery).to_module()
+    rec = NearestNeighborRecognizer.from_views(
+        projection, gallery, torch.arange(4) % 2, torch.zeros(4), ["a", "b"]
+    )
+    # A quarter of the closest two gallery views' distance: the 8-bit files stay well inside it.
+    gap = float(torch.pdist(rec.codes).min())
+    rec.set_rejection(torch.tensor([float("inf"), gap / 4]))
+    stranger = 1.0 - gallery[:1]  # the negative of a gallery view
+    files = []
+    for i, view in enumerate([*gallery[:2], stranger[0]]):
+        files.append(str(tmp_path / f"v{i}.png"))
+        skimage.io.imsave(files[-1], (view[0].numpy() * 255).round().astype(np.uint8), check_contrast=False)
+    read = torch.stack([torch.from_numpy(skimage.io.imread(f)).float()[None] / 255 for f in files])
+    assert rec.predict(read, reject=True).known.tolist() == [True, True, False]  # type: ignore[union-attr]
+    path = tmp_path / "reject.onnx"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert export_recognizer(rec, path).reject
+    code, out, _ = _run(
+        ["predict", "--onnx", str(path), "--reject", *files, "--json", str(tmp_path / "p.json")], capsys
+    )
+    assert code == 0
+    lines = out.splitlines()
+    assert "\tlabel a\t" in lines[0] and "\tlabel b\t" in lines[1] and "\tunknown\t" in lines[2]
+    assert [r["known"] for r in json.loads((tmp_path / "p.json").read_text())] == [True, True, False]
+    code, out, err = _run(["predict", "--onnx", str(model), "--reject", *images], capsys)
+    assert code == 2 and not out
+    assert "--reject needs a model with rejection thresholds" in err and str(model) in err
