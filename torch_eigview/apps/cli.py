@@ -26,6 +26,8 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
 )
 from torch_eigview.apps.coil_command import add_coil_command, run_coil
+from torch_eigview.apps.evaluate_command import add_evaluate_command, run_evaluate
+from torch_eigview.apps.fit_command import add_fit_command, run_fit
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
@@ -42,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True)
     add_coil_command(sub)
+    add_fit_command(sub)
+    add_evaluate_command(sub)
     _add_export_and_predict(sub)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
     demo.add_argument(
@@ -174,7 +178,13 @@ def _show_warning(message: Warning | str, category: type[Warning], *_: object, *
 
 def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     try:
-        runs = {"coil": run_coil, "demo": _run_demo, "synth": _run_synth}
+        runs = {
+            "coil": run_coil,
+            "fit": run_fit,
+            "evaluate": run_evaluate,
+            "demo": _run_demo,
+            "synth": _run_synth,
+        }
         if args.command in runs:
             from torch_eigview.scale.thread_policy import threads
 
