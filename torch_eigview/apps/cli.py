@@ -2,8 +2,11 @@
 
 ``eigview coil --root DIR --alpha 5 ...`` runs the paper's COIL experiment (Fig. 4(b))
 on a folder of ``obj{O}__{P}.png`` images and prints a per-object accuracy table.
+``eigview fit --manifest views.csv --seeds 0 10 --out model.pt`` fits a recognizer from the
+seed views of any objects; ``eigview evaluate --model model.pt --manifest views.csv`` scores it.
 ``eigview export --model FILE --out model.onnx [--recognizer]`` writes a saved model as
-ONNX; ``eigview predict --onnx model.onnx IMAGES...`` recognizes images with onnxruntime.
+ONNX; ``eigview predict --onnx model.onnx IMAGES...`` recognizes images with onnxruntime
+(``--model model.pt``: with torch).
 
 Torch-using modules are imported inside the subcommands: ``predict`` never imports torch.
 """
@@ -88,7 +91,9 @@ def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentPar
     from torch_eigview.apps.predict import add_arguments
 
     export = sub.add_parser("export", help="write a saved model (eigview coil --save) as ONNX")
-    export.add_argument("--model", required=True, metavar="FILE", help="file written by eigview coil --save")
+    export.add_argument(
+        "--model", required=True, metavar="FILE", help="file written by eigview fit or eigview coil --save"
+    )
     export.add_argument("--out", required=True, metavar="FILE", help="the .onnx file to write")
     export.add_argument(
         "--recognizer",
@@ -96,18 +101,23 @@ def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentPar
         help="export the whole recognizer (images -> label, pose, distance), not just the projection",
     )
     export.add_argument("--opset", type=opset_arg, default=MIN_OPSET, help="ONNX opset (>= 18)")
-    predict = sub.add_parser("predict", help="recognize images with an exported ONNX recognizer (no torch)")
+    predict = sub.add_parser(
+        "predict", help="recognize images with an exported ONNX recognizer (no torch) or a model file"
+    )
     add_arguments(predict)
 
 
 def _run_export(args: argparse.Namespace) -> int:
+    from torch_eigview.apps.view_inputs import model_preprocessing
     from torch_eigview.io.checkpoint import load_recognizer
     from torch_eigview.io.onnx import export_projection, export_recognizer
 
     check_outputs([("--out", args.out)], inputs=[("--model", args.model)])
-    recognizer, _ = load_recognizer(args.model)  # verifies the model's checksum
+    recognizer, meta = load_recognizer(args.model)  # verifies the model's checksum
     if args.recognizer:
-        info = export_recognizer(recognizer, args.out, opset_version=args.opset)
+        # An eigview fit model's preprocessing goes into the graph's metadata, for predict.
+        prep = model_preprocessing(recognizer, meta, args.model) if "preprocessing" in meta else None
+        info = export_recognizer(recognizer, args.out, opset_version=args.opset, preprocessing=prep)
     else:
         info = export_projection(recognizer.projection, args.out, opset_version=args.opset)
     c, h, w = info.image_shape

@@ -141,7 +141,8 @@ def read_view(
         path: The image file.
         mask: Its mask image (non-zero is object), or None (the alpha channel, else all True).
         size, channels, dtype: As :class:`ViewDataset`'s.
-        source: Where the file was listed (a manifest line), prefixed to errors.
+        source: Where the file was listed (a manifest line), prefixed to errors (the
+            messages name the files in any case).
 
     Returns:
         ``(image, mask)``: ``(C, H, W)`` of ``dtype`` in ``[0, 1]`` and ``(1, H, W)`` bool.
@@ -167,7 +168,9 @@ def read_view(
         else:
             found = np.ones((1, *colour.shape[1:]), dtype=bool)
     except ValueError as exc:
-        raise ValueError(f"{source or path}: {exc}") from None
+        if source is None:
+            raise
+        raise ValueError(f"{source}: {exc}") from None
     work = np.float64 if dtype == torch.float64 else np.float32
     image = torch.from_numpy(to_unit_float(colour, work)).to(dtype)
     if channels == 3 and image.shape[0] == 1:
