@@ -18,17 +18,10 @@ from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 from torch_eigview.io.checkpoint import load_recognizer
 from torch_eigview.io.preprocessing import Preprocessing
 
+from tests.helpers import run_cli
+
 SIDE = 32
 AZIMUTHS = list(range(-40, 41, 10))
-
-
-def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = int(exc.code)  # type: ignore[arg-type]
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def _png(path: Path, image: torch.Tensor) -> str:
@@ -84,7 +77,7 @@ def test_evaluate_scores_every_view_and_excludes_seeds(
     model: Path, views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     report = tmp_path / "r.json"
-    code, out, _ = _run(
+    code, out, _ = run_cli(
         ["evaluate", "--model", str(model), "--manifest", str(views), "--json", str(report)], capsys
     )
     assert code == 0, out
@@ -95,7 +88,7 @@ def test_evaluate_scores_every_view_and_excludes_seeds(
     assert record["accuracy"] >= 80.0  # two objects: chance is 50
     assert 0.0 <= record["pose_error_deg"]["median"] <= record["pose_error_deg"]["mean"] + 20
     assert record["skipped"] == [] and record["rejection"] is None
-    code, _, _ = _run(
+    code, _, _ = run_cli(
         [
             "evaluate",
             "--model",
@@ -131,7 +124,7 @@ def test_evaluate_reports_bad_rows_and_goes_on(
     ]
     manifest = _write(tmp_path / "bad.csv", rows)
     report = tmp_path / "r.json"
-    code, out, err = _run(
+    code, out, err = run_cli(
         ["evaluate", "--model", str(model), "--manifest", str(manifest), "--json", str(report)], capsys
     )
     assert code == 1
@@ -163,7 +156,7 @@ def test_fit_bad_seeds(
     views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], match: str
 ) -> None:
     args = ["fit", "--manifest", str(views), *argv, "--quiet", "--out", str(tmp_path / "m.pt")]
-    code, _, err = _run(args, capsys)
+    code, _, err = run_cli(args, capsys)
     assert code == 2
     assert re.search(match, err), err
     assert not (tmp_path / "m.pt").exists()
@@ -176,7 +169,7 @@ def test_fit_object_with_fewer_views_than_seeds(tmp_path: Path, capsys: pytest.C
     manifest = _write(
         tmp_path / "m.csv", ["path,object,azimuth", "a.png,egg,0", "b.png,egg,10", "a.png,cup,0"]
     )
-    code, _, err = _run(
+    code, _, err = run_cli(
         ["fit", "--manifest", str(manifest), "--seeds", "0", "10", "--out", str(tmp_path / "m.pt")], capsys
     )
     assert code == 2
@@ -186,11 +179,11 @@ def test_fit_object_with_fewer_views_than_seeds(tmp_path: Path, capsys: pytest.C
 def test_fit_checks_output_and_inputs_first(
     views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    code, _, err = _run(_fit_args(views, tmp_path / "missing" / "m.pt"), capsys)
+    code, _, err = run_cli(_fit_args(views, tmp_path / "missing" / "m.pt"), capsys)
     assert code == 2 and "--out" in err and "does not exist" in err
-    code, _, err = _run(_fit_args(views, views), capsys)  # would overwrite the manifest
+    code, _, err = run_cli(_fit_args(views, views), capsys)  # would overwrite the manifest
     assert code == 2 and "same file as --manifest" in err
-    code, _, err = _run(
+    code, _, err = run_cli(
         ["fit", "--pattern", "{object}/{azimuth}.png", "--seeds", "0", "10", "--out", str(tmp_path / "m.pt")],
         capsys,
     )
@@ -226,7 +219,7 @@ def test_predict_model_and_onnx_apply_the_recorded_preprocessing(
     answers = {}
     for flag, path in (("--model", model), ("--onnx", onnx_path)):
         report = tmp_path / f"{flag[2:]}.json"
-        code, _, err = _run(["predict", flag, str(path), *images, "--json", str(report)], capsys)
+        code, _, err = run_cli(["predict", flag, str(path), *images, "--json", str(report)], capsys)
         assert code == 0, err
         answers[flag] = json.loads(report.read_text())
     assert [r["label"] for r in answers["--model"]] == ["egg", "head"]

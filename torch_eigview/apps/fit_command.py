@@ -134,9 +134,8 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
                 f"--seeds {m:g}: one value is M, the number of seed views round the circle, an integer >= 3 "
                 "(M = 2 puts them 180 degrees apart, where Eq. 7's sin(alpha) is 0); or list two or more azimuths"
             )
-        alpha = 360.0 / m
-        azimuths = [(center + k * alpha) % 360.0 for k in range(int(m))]
-        return SeedPlan(azimuths, _wrap(center), alpha, None, step)
+        azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
+        return SeedPlan(azimuths, _wrap(center), 360.0 / m, None, step)
     steps = [_wrap(b - a) for a, b in itertools.pairwise(seeds)]
     if any(abs(s) < _TOL for s in steps):
         raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")
