@@ -229,8 +229,22 @@ def test_predict_model_and_onnx_apply_the_recorded_preprocessing(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(
+    ("coil_args", "seeds", "tested"),
+    [
+        (["--alpha", "10"], ["0", "10"], range(-45, 50, 5)),
+        (["--alpha", "10", "--views", "3"], ["0", "10", "20"], range(-45, 50, 5)),
+        (["--seeds", "8"], ["8"], [a for a in range(0, 360, 5) if a % 45]),
+    ],
+    ids=["two-seeds", "three-seeds", "circle-8"],
+)
 def test_coil_through_a_manifest_equals_eigview_coil(
-    coil_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    coil_root: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    coil_args: list[str],
+    seeds: list[str],
+    tested: list[int],
 ) -> None:
     """The must-hold: fit + evaluate over a manifest of COIL files give eigview coil's table."""
     objects = (1, 4, 7)
@@ -238,25 +252,14 @@ def test_coil_through_a_manifest_equals_eigview_coil(
         f"{coil_root}/obj{o}__{p}.png,{o},{5 * p}" for o in objects for p in range(72)
     ]
     tests = ["path,object,azimuth"] + [
-        f"{coil_root}/obj{o}__{(a % 360) // 5}.png,{o},{a}" for o in objects for a in range(-45, 50, 5)
+        f"{coil_root}/obj{o}__{(a % 360) // 5}.png,{o},{a}" for o in objects for a in tested
     ]
     coil_json, eval_json, model = tmp_path / "coil.json", tmp_path / "eval.json", tmp_path / "m.pt"
-    coil_argv = [
-        "coil",
-        "--root",
-        str(coil_root),
-        "--alpha",
-        "10",
-        "--objects",
-        "1,4,7",
-        "--synth",
-        "-20",
-        "20",
-        "2",
-    ]
+    synth = ["--synth", "-20", "20", "2"]
+    coil_argv = ["coil", "--root", str(coil_root), *coil_args, "--objects", "1,4,7", *synth]
     assert main([*coil_argv, "--quiet", "--json", str(coil_json)]) == 0
-    fit_argv = ["fit", "--manifest", str(_write(tmp_path / "all.csv", listed)), "--seeds", "0", "10"]
-    assert main([*fit_argv, "--synth", "-20", "20", "2", "--quiet", "--out", str(model)]) == 0
+    fit_argv = ["fit", "--manifest", str(_write(tmp_path / "all.csv", listed)), "--seeds", *seeds]
+    assert main([*fit_argv, *synth, "--quiet", "--out", str(model)]) == 0
     manifest = _write(tmp_path / "test.csv", tests)
     assert (
         main(["evaluate", "--model", str(model), "--manifest", str(manifest), "--json", str(eval_json)]) == 0
