@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -21,6 +23,10 @@ from torch_eigview.io.preprocessing import Preprocessing
 from tests.helpers import run_cli
 
 SIDE = 32
+PREDICT_NO_TORCH = (
+    "import sys; from torch_eigview.apps.cli import main; rc = main(sys.argv[1:]); "
+    "assert 'torch' not in sys.modules, 'predict imported torch'; sys.exit(rc)"
+)
 AZIMUTHS = list(range(-40, 41, 10))
 
 
@@ -226,6 +232,22 @@ def test_predict_model_and_onnx_apply_the_recorded_preprocessing(
     for a, b in zip(answers["--model"], answers["--onnx"], strict=True):
         assert a["label"] == b["label"] and a["pose"] == b["pose"]
         assert a["distance"] == pytest.approx(b["distance"], rel=1e-3, abs=1e-5)
+    # Torch-free, with a missing file among the images: reported, the others answered.
+    argv = [
+        "predict",
+        "--onnx",
+        str(onnx_path),
+        images[0],
+        str(tmp_path / "gone.png"),
+        images[1],
+        "--debug-modules",
+    ]
+    proc = subprocess.run(
+        [sys.executable, "-c", PREDICT_NO_TORCH, *argv], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert "torch imported: False" in proc.stderr and "gone.png does not exist" in proc.stderr
+    assert [line.split("\t")[1] for line in proc.stdout.splitlines()] == ["label egg", "label head"]
 
 
 @pytest.mark.slow
