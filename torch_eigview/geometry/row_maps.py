@@ -61,15 +61,15 @@ def invert_row_map(
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
     # other, never concatenated.
-    best = torch.full((n,), -math.inf, dtype=dtype, device=device)
+    best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
     for idx, key, _ in parts:
         best.scatter_reduce_(0, idx, key, reduce="amax")
-    out = torch.full((n,), -math.inf, dtype=dtype, device=device)
+    out = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
     for idx, key, src in parts:
         win = key >= best.index_select(0, idx)
         out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax")
-    hit = best != -math.inf
-    return torch.where(hit, out, math.nan).view(b, t, h, w), hit.view(b, t, h, w)
+    hit = best[:n] != -math.inf
+    return torch.where(hit, out[:n], math.nan).view(b, t, h, w), hit.view(b, t, h, w)
 
 
 def _segment_columns(
@@ -78,10 +78,12 @@ def _segment_columns(
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
     Segment k of a row (source pixels k, k + 1) starts at target column ``f0 = dst[k]``
-    and spans ``length = dst[k + 1] - f0`` columns; it covers the integer columns
-    ``col0 + m`` inside the image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``.
-    Only the ``seg_ok`` segments are gathered; slot m keeps those that reach it (most
-    segments cover at most one column: views foreshorten).
+    and ends at ``f1 = dst[k + 1]``; it covers the integer columns ``col0 + m`` inside the
+    image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``. When most segments
+    pass (a view's object fills it) slot 0 is computed for all of them on views of the
+    map, a refused one sending key -inf to a spare pixel; when few do (a background around
+    the object) only those are gathered. Slots m >= 1 gather the few segments that reach
+    them (views foreshorten).
 
     Args:
         dst: (B, T, H, W) forward map; ``depth`` the same shape or None.
@@ -89,39 +91,64 @@ def _segment_columns(
 
     Returns:
         One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel in
-        B·T·H·W, the z-buffer key and the source column.
+        B·T·H·W (or the spare pixel B·T·H·W), the z-buffer key and the source column.
     """
-    w = dst.shape[-1]
-    dtype = dst.dtype
-    seg = seg_ok.reshape(-1).nonzero().squeeze(1)
-    k = seg % (w - 1)
-    left = seg + seg // (w - 1)  # flat index of source pixel k in (B, T, H, W)
-    flat = dst.reshape(-1)
-    f0, f1 = flat.index_select(0, left), flat.index_select(0, left + 1)
+    b, t, h, w = dst.shape
+    dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
+    fields = [dst] if depth is None else [dst, depth]
+    seg = None
+    if 2 * int(seg_ok.sum()) >= seg_ok.numel():
+        ends = [(v[..., :-1], v[..., 1:]) for v in fields]
+        k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
+        row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
+    else:
+        seg = seg_ok.reshape(-1).nonzero().squeeze(1)
+        left = seg + seg // w1  # source pixel k of the segment, flat in (B, T, H, W)
+        ends = [
+            (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
+        ]
+        k, row_start = (seg % w1).to(dtype), (seg // w1) * w
+    (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
     length = f1 - f0
-    d0 = d1 = None
-    if depth is not None:
-        flat_depth = depth.reshape(-1)
-        d0, d1 = flat_depth.index_select(0, left), flat_depth.index_select(0, left + 1)
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.floor(f1).clamp(max=w - 1) - col0
-    row_start = left - k  # flat index of the row's first pixel
-    parts = []
-    m = 0
-    cand = (room >= 0).nonzero().squeeze(1)
+    if seg is None:
+        room = torch.where(seg_ok, room, -1.0)
+    ok0 = room >= 0
+    src0, key0 = _interpolate((col0 - f0) / length, k, dd)
+    idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
+    parts = [(idx0, torch.where(ok0, key0, -math.inf).reshape(-1), src0.reshape(-1))]
+    flat = [v.reshape(-1) for v in (col0, f0, length, room)]
+    flat_depth = None if dd is None else (dd[0].reshape(-1), dd[1].reshape(-1))
+    cand = (flat[3] >= 1).nonzero().squeeze(1)
+    m = 1
     while cand.numel():
-        col = col0.index_select(0, cand) + m
-        frac = (col - f0.index_select(0, cand)) / length.index_select(0, cand)
-        src = k.index_select(0, cand).to(dtype) + frac
-        if d0 is None or d1 is None:
-            key = src
+        c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
+        col = c0 + m
+        if seg is None:
+            lo, start = (cand % w1).to(dtype), (cand // w1) * w
         else:
-            e0 = d0.index_select(0, cand)
-            key = e0 + (d1.index_select(0, cand) - e0) * frac
-        parts.append((row_start.index_select(0, cand) + col.long(), key, src))
+            lo, start = k.index_select(0, cand), row_start.index_select(0, cand)
+        sel = (
+            None
+            if flat_depth is None
+            else (flat_depth[0].index_select(0, cand), flat_depth[1].index_select(0, cand))
+        )
+        src_m, key_m = _interpolate((col - s0) / ln, lo, sel)
+        parts.append((start + col.long(), key_m, src_m))
         m += 1
-        cand = cand[room.index_select(0, cand) >= m]
+        cand = cand[flat[3].index_select(0, cand) >= m]
     return parts
+
+
+def _interpolate(
+    frac: torch.Tensor, lo: torch.Tensor, depth: tuple[torch.Tensor, torch.Tensor] | None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Source column ``lo + frac`` inside a segment and its z-buffer key (the depth of its
+    ends ``depth`` interpolated, or the source column itself without depth)."""
+    src = lo + frac
+    key = src if depth is None else depth[0] + (depth[1] - depth[0]) * frac
+    return src, key
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
