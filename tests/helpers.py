@@ -8,6 +8,7 @@ import io
 from collections.abc import Sequence
 from typing import Any
 
+import pytest
 import torch
 
 
@@ -177,3 +178,15 @@ def warp_errors(
     warp = NovelViewWarp(alpha) if warp is None else warp
     views = warp(r1.image, r2.image, correspondence=corr, thetas=list(thetas))
     return [seen_error(obj, camera, views[i], theta, (0.0, alpha)) for i, theta in enumerate(thetas)]
+
+
+def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Runs ``eigview`` in process: its exit status (argparse's and errors' included), stdout, stderr."""
+    from torch_eigview.apps.cli import main
+
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = int(exc.code)  # type: ignore[arg-type]
+    out = capsys.readouterr()
+    return code, out.out, out.err

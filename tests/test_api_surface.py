@@ -102,6 +102,7 @@ SUBPACKAGES = {
     ],
     "io": [
         "OnnxModelInfo",
+        "Preprocessing",
         "compare_with_eager",
         "export_onnx",
         "export_projection",
@@ -134,6 +135,7 @@ SUBPACKAGES = {
         "make_camera",
         "make_object",
         "parse_object_spec",
+        "read_view",
         "render",
         "render_views",
         "seen_error",

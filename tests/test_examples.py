@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import itertools
 from pathlib import Path
 from types import ModuleType
 
@@ -87,6 +88,6 @@ def test_reject_unknown(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert "calibrated:" in out and out.count("ROC: known rejected <=") == 4
     roc = result["roc"]
     assert isinstance(roc, list) and roc[0]["unknown_rejected"] >= roc[-1]["unknown_rejected"] == 0.0
-    assert all(a["known_rejected"] >= b["known_rejected"] for a, b in zip(roc, roc[1:]))
+    assert all(a["known_rejected"] >= b["known_rejected"] for a, b in itertools.pairwise(roc))
     assert result["n_known"] == 3 * 19 and result["n_unknown"] == 2 * 19
     assert float(result["unknown_rejected"]) > float(result["known_rejected"])  # type: ignore[arg-type]

@@ -17,16 +17,16 @@ import skimage.io
 import torch
 from onnx import helper, numpy_helper
 
-from torch_eigview.apps.cli import main
 from torch_eigview.apps.predict import escape
 from torch_eigview.decomposition import Eigenspace
+from torch_eigview.io.checkpoint import save_recognizer
 from torch_eigview.io.onnx import export_recognizer
 from torch_eigview.io.onnx_check import check_recognizer_graph
 from torch_eigview.io.onnx_checksum import DIGEST_KEY, append_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
-from tests.helpers import rand
+from tests.helpers import rand, run_cli
 
 SHAPE = (1, 8, 8)
 
@@ -76,15 +76,6 @@ def _set_meta(m: onnx.ModelProto, key: str, value: str) -> None:
             p.value = value
 
 
-def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = int(exc.code)  # type: ignore[arg-type]
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
 def test_escape() -> None:
     assert escape("obj\x1b[31m\nFAKE\tx\u2028") == "obj\\x1b[31m\\nFAKE\\tx\\u2028"
     assert escape("plain name 7") == "plain name 7"
@@ -95,7 +86,7 @@ def test_label_names_printed_escaped(
 ) -> None:
     names = json.dumps(["\x1b[2J", "b\nimg9.png\tlabel x", "c\x1b[31m\r"])
     bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", names))
-    code, out, _ = _run(["predict", "--onnx", str(bad), *images], capsys)
+    code, out, _ = run_cli(["predict", "--onnx", str(bad), *images], capsys)
     assert code == 0
     assert "\x1b" not in out and "\r" not in out and len(out.splitlines()) == len(images)
     assert any(
@@ -107,7 +98,9 @@ def test_wrong_label_list_length_is_a_per_row_error(
     model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", json.dumps(["a"])))
-    code, _, err = _run(["predict", "--onnx", str(bad), *images, "--json", str(tmp_path / "p.json")], capsys)
+    code, _, err = run_cli(
+        ["predict", "--onnx", str(bad), *images, "--json", str(tmp_path / "p.json")], capsys
+    )
     assert code == 1
     assert "outside its 1 label names" in err
     rows = json.loads((tmp_path / "p.json").read_text())
@@ -128,7 +121,7 @@ def test_tampered_codes_refused_before_running(
     model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     bad = _rewrite(model, tmp_path / "m.onnx", _poison_codes)
-    code, out, err = _run(["predict", "--onnx", str(bad), *images], capsys)
+    code, out, err = run_cli(["predict", "--onnx", str(bad), *images], capsys)
     assert code == 2 and out == ""
     assert "codes" in err and "NaN or infinite" in err
 
@@ -197,13 +190,13 @@ def test_float_tiff_outside_range_is_an_error(
 
     big = tmp_path / "big.tif"
     tifffile.imwrite(big, np.full(SHAPE[1:], 1e32, dtype=np.float32))
-    code, out, err = _run(["predict", "--onnx", str(model), images[0], str(big)], capsys)
+    code, out, err = run_cli(["predict", "--onnx", str(model), images[0], str(big)], capsys)
     assert code == 1 and "values outside [0, 1]" in err and len(out.splitlines()) == 1
 
 
 def test_many_images_in_batches(model: Path, images: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     many = images * 50  # 150 paths: three batches of up to 64
-    code, out, _ = _run(["predict", "--onnx", str(model), *many], capsys)
+    code, out, _ = run_cli(["predict", "--onnx", str(model), *many], capsys)
     lines = out.splitlines()
     assert code == 0 and len(lines) == len(many)
     assert lines[:3] == lines[3:6] == lines[-3:]
@@ -233,13 +226,15 @@ def test_reject_prints_unknown(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert export_recognizer(rec, path).reject
-    code, out, _ = _run(
-        ["predict", "--onnx", str(path), "--reject", *files, "--json", str(tmp_path / "p.json")], capsys
-    )
-    assert code == 0
-    lines = out.splitlines()
-    assert "\tlabel a\t" in lines[0] and "\tlabel b\t" in lines[1] and "\tunknown\t" in lines[2]
-    assert [r["known"] for r in json.loads((tmp_path / "p.json").read_text())] == [True, True, False]
-    code, out, err = _run(["predict", "--onnx", str(model), "--reject", *images], capsys)
+    capsys.readouterr()  # the exporter's progress lines
+    save_recognizer(tmp_path / "reject.pt", rec)
+    for flag, source in (("--onnx", path), ("--model", tmp_path / "reject.pt")):
+        argv = ["predict", flag, str(source), "--reject", *files, "--json", str(tmp_path / "p.json")]
+        code, out, _ = run_cli(argv, capsys)
+        assert code == 0
+        lines = out.splitlines()
+        assert "\tlabel a\t" in lines[0] and "\tlabel b\t" in lines[1] and "\tunknown\t" in lines[2]
+        assert [r["known"] for r in json.loads((tmp_path / "p.json").read_text())] == [True, True, False]
+    code, out, err = run_cli(["predict", "--onnx", str(model), "--reject", *images], capsys)
     assert code == 2 and not out
     assert "--reject needs a model with rejection thresholds" in err and str(model) in err

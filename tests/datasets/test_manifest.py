@@ -11,7 +11,7 @@ import skimage.io
 import torch
 from torch.utils.data import DataLoader
 
-from torch_eigview.datasets import CoilFolder, ViewDataset, ViewManifest
+from torch_eigview.datasets import CoilFolder, ViewDataset, ViewManifest, read_view
 
 
 def _save(path: Path, arr: np.ndarray) -> Path:
@@ -203,3 +203,31 @@ def test_coil_manifest_gives_coilfolder_tensors(coil_root: Path, folder: CoilFol
         got = torch.stack([ds[index[(str(obj), d)]]["image"] for d in degrees])
         assert got.dtype == expected.dtype
         assert torch.equal(got, expected)
+
+
+def test_skipped_collects_bad_lines_and_keeps_the_rest(tmp_path: Path) -> None:
+    _save(tmp_path / "a.png", _gray(0))
+    rows = [
+        "path,object,azimuth",
+        "a.png,a,0",
+        "gone.png,a,5",
+        "a.png,a,ten",
+        "a.png,a,360",
+        "a.png,a,10",
+        "x",
+    ]
+    skipped: list[str] = []
+    man = ViewManifest.from_csv(_write_csv(tmp_path / "m.csv", rows), skipped=skipped)
+    assert [e.azimuth for e in man] == [0.0, 10.0]
+    assert [s.split(": ")[0] for s in skipped] == [f"{tmp_path / 'm.csv'} line {n}" for n in (3, 4, 7, 5)]
+    assert "gone.png does not exist" in skipped[0] and "azimuth='ten'" in skipped[1]
+    assert "has 1 fields" in skipped[2] and "duplicates the view of" in skipped[3]
+    with pytest.raises(ValueError, match="lists no view"):
+        ViewManifest.from_csv(
+            _write_csv(tmp_path / "n.csv", ["path,object,azimuth", "gone.png,a,0"]), skipped=[]
+        )
+
+
+def test_read_view_without_source_names_the_file(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"^image .*nothing\.png does not exist$"):
+        read_view(tmp_path / "nothing.png")

@@ -79,6 +79,28 @@ def test_invert_row_map_monotone(stretch: float) -> None:
 
 
 @pytest.mark.parametrize("use_depth", [True, False])
+@pytest.mark.parametrize("valid_rate", [0.2, 0.9])
+def test_invert_row_map_sparse_and_dense_segments(use_depth: bool, valid_rate: float) -> None:
+    """Few valid segments (an object on a background: only those are gathered) and many
+    (slot 0 on views of the map) both equal the loop; a batch mixing the two regimes
+    equals its objects inverted one at a time, bit for bit."""
+    b, t, h, w = 3, 2, 3, 12
+    x = torch.arange(w, dtype=torch.float64)
+    dst = x + 2.4 * torch.sin(0.9 * x + rand(b, t, h, 1, seed=21) * 6)  # folds and long segments
+    depth = rand(b, t, h, w, seed=22) if use_depth else None
+    valid = rand(b, h, w, seed=23) < valid_rate
+    _check_inverse(dst, valid, depth, 2.5)
+    valid[0] = True  # object 0 alone takes the other regime than a sparse batch
+    src, hit = invert_row_map(dst, valid, depth, 2.5)
+    for i in range(b):
+        one = invert_row_map(
+            dst[i : i + 1], valid[i : i + 1], None if depth is None else depth[i : i + 1], 2.5
+        )
+        assert torch.equal(one[1], hit[i : i + 1])
+        assert torch.equal(one[0][one[1]], src[i : i + 1][hit[i : i + 1]])
+
+
+@pytest.mark.parametrize("use_depth", [True, False])
 def test_invert_row_map_fold_picks_nearest(use_depth: bool) -> None:
     """A map that folds back (x - 2.4 sin x): the reversed segments are dropped and where
     the forward ones overlap, the largest depth (or, without depth, source x) wins."""

@@ -65,6 +65,34 @@ def test_per_object_maps_are_the_per_object_maps_stacked() -> None:
             )
 
 
+@pytest.mark.parametrize("elevation", [0.0, 10.0])
+def test_objects_on_a_background_batched_equal_the_per_object_maps_bit_for_bit(elevation: float) -> None:
+    """Objects trusted only inside their own box (a background around each, as rendered
+    objects are): the batch, mostly background, builds its maps in the sparse regime while
+    the large object 0 alone takes the dense one; the maps agree bit for bit."""
+    b, h, w = 4, 10, 16
+    d12 = 3.0 * rand(b, h, w, seed=40) - 1.5
+    corr = correspondence_from_disparity(d12)
+    box = torch.zeros(b, h, w, dtype=torch.bool)
+    box[0] = True
+    for i, (r, c) in enumerate([(1, 2), (4, 8), (2, 5)], start=1):
+        box[i, r : r + 4, c : c + 5] = True
+    corr.valid_12.logical_and_(box)  # in place: the record is frozen
+    corr.valid_21.logical_and_(box)
+    thetas = torch.tensor([[-14.0], [6.0], [ALPHA], [25.0]], dtype=torch.float64)
+    warp = NovelViewWarp(ALPHA, elevation=elevation)
+    maps = warp.maps(corr, thetas)
+    assert float(maps.hit.double().mean()) < 0.5  # mostly holes: the batch's sparse regime
+    for i in range(b):
+        one = warp.maps(corr[i], thetas[i])
+        for field in ("src_x", "src_y", "weight", "hit"):
+            got, ref = getattr(maps, field), getattr(one, field)
+            if ref is None:
+                assert got is None
+                continue
+            assert torch.equal(got[:, i : i + 1], ref), field
+
+
 def test_affine_camera_per_object_angles() -> None:
     camera = torch.tensor([[2.0, 0.0, 0.0, 4.0], [0.0, -2.0, 0.0, 3.0]], dtype=torch.float64)
     view1, view2, corr = _objects(2)

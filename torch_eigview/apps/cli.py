@@ -2,8 +2,11 @@
 
 ``eigview coil --root DIR --alpha 5 ...`` runs the paper's COIL experiment (Fig. 4(b))
 on a folder of ``obj{O}__{P}.png`` images and prints a per-object accuracy table.
+``eigview fit --manifest views.csv --seeds 0 10 --out model.pt`` fits a recognizer from the
+seed views of any objects; ``eigview evaluate --model model.pt --manifest views.csv`` scores it.
 ``eigview export --model FILE --out model.onnx [--recognizer]`` writes a saved model as
-ONNX; ``eigview predict --onnx model.onnx IMAGES...`` recognizes images with onnxruntime.
+ONNX; ``eigview predict --onnx model.onnx IMAGES...`` recognizes images with onnxruntime
+(``--model model.pt``: with torch).
 
 Torch-using modules are imported inside the subcommands: ``predict`` never imports torch.
 """
@@ -26,6 +29,8 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
 )
 from torch_eigview.apps.coil_command import add_coil_command, run_coil
+from torch_eigview.apps.evaluate_command import add_evaluate_command, run_evaluate
+from torch_eigview.apps.fit_command import add_fit_command, run_fit
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
@@ -42,6 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="eigview", description=__doc__.splitlines()[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True)
     add_coil_command(sub)
+    add_fit_command(sub)
+    add_evaluate_command(sub)
     _add_export_and_predict(sub)
     demo = sub.add_parser("demo", help="the embedded demo: Fig. 2 on five rendered synthetic objects")
     demo.add_argument(
@@ -97,7 +104,9 @@ def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentPar
     from torch_eigview.apps.predict import add_arguments
 
     export = sub.add_parser("export", help="write a saved model (eigview coil --save) as ONNX")
-    export.add_argument("--model", required=True, metavar="FILE", help="file written by eigview coil --save")
+    export.add_argument(
+        "--model", required=True, metavar="FILE", help="file written by eigview fit or eigview coil --save"
+    )
     export.add_argument("--out", required=True, metavar="FILE", help="the .onnx file to write")
     export.add_argument(
         "--recognizer",
@@ -105,18 +114,23 @@ def _add_export_and_predict(sub: argparse._SubParsersAction[argparse.ArgumentPar
         help="export the whole recognizer (images -> label, pose, distance), not just the projection",
     )
     export.add_argument("--opset", type=opset_arg, default=MIN_OPSET, help="ONNX opset (>= 18)")
-    predict = sub.add_parser("predict", help="recognize images with an exported ONNX recognizer (no torch)")
+    predict = sub.add_parser(
+        "predict", help="recognize images with an exported ONNX recognizer (no torch) or a model file"
+    )
     add_arguments(predict)
 
 
 def _run_export(args: argparse.Namespace) -> int:
+    from torch_eigview.apps.view_inputs import model_preprocessing
     from torch_eigview.io.checkpoint import load_recognizer
     from torch_eigview.io.onnx import export_projection, export_recognizer
 
     check_outputs([("--out", args.out)], inputs=[("--model", args.model)])
-    recognizer, _ = load_recognizer(args.model)  # verifies the model's checksum
+    recognizer, meta = load_recognizer(args.model)  # verifies the model's checksum
     if args.recognizer:
-        info = export_recognizer(recognizer, args.out, opset_version=args.opset)
+        # An eigview fit model's preprocessing goes into the graph's metadata, for predict.
+        prep = model_preprocessing(recognizer, meta, args.model) if "preprocessing" in meta else None
+        info = export_recognizer(recognizer, args.out, opset_version=args.opset, preprocessing=prep)
     else:
         info = export_projection(recognizer.projection, args.out, opset_version=args.opset)
     c, h, w = info.image_shape
@@ -189,7 +203,13 @@ def _show_warning(message: Warning | str, category: type[Warning], *_: object, *
 
 def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     try:
-        runs = {"coil": run_coil, "demo": _run_demo, "synth": _run_synth}
+        runs = {
+            "coil": run_coil,
+            "fit": run_fit,
+            "evaluate": run_evaluate,
+            "demo": _run_demo,
+            "synth": _run_synth,
+        }
         if args.command in runs:
             from torch_eigview.scale.thread_policy import threads
 

@@ -25,8 +25,9 @@ if TYPE_CHECKING:
     import torch
 
     from torch_eigview.apps.experiment import CoilResult
+    from torch_eigview.synthesis import SynthesisOptions
 
-__all__ = ["add_coil_command", "format_table", "run_coil"]
+__all__ = ["add_coil_command", "add_synthesis_arguments", "format_table", "run_coil", "synthesis_options"]
 
 
 def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -93,36 +94,13 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     )
     coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
     coil.add_argument("--objects", type=objects_arg, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
-    coil.add_argument(
-        "--flow",
-        choices=("tvl1", "ilk", "rows"),
-        default="tvl1",
-        help="correspondences: optical flow, or semi-global matching along rows (rows)",
-    )
-    coil.add_argument(
-        "--elevation",
-        type=elevation_arg,
-        default="auto",
-        help="camera elevation, degrees, or 'auto' (default)",
-    )
-    coil.add_argument(
-        "--blend",
-        choices=("linear", "nearest"),
-        default="linear",
-        help="pixels both seeds see: cross-dissolve by angle, or the nearer seed alone",
-    )
-    coil.add_argument(
-        "--silhouette",
-        action="store_true",
-        help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
-    )
+    add_synthesis_arguments(coil)
     coil.add_argument(
         "--pose-unit",
         choices=("auto", "index", "degrees"),
         default="auto",
         help="file pose P: an index (COIL-20, 5*P degrees), degrees (COIL-100), or auto (default)",
     )
-    coil.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
     coil.add_argument("--save", metavar="FILE", help="write the fitted eigenspace and gallery")
@@ -144,6 +122,47 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     )
     add_quiet(coil)
     add_threads(coil)
+
+
+def add_synthesis_arguments(parser: argparse.ArgumentParser) -> None:
+    """The novel-view synthesis options (``eigview coil`` and ``eigview fit``): see :func:`synthesis_options`."""
+    parser.add_argument(
+        "--flow",
+        choices=("tvl1", "ilk", "rows"),
+        default="tvl1",
+        help="correspondences: optical flow, or semi-global matching along rows (rows)",
+    )
+    parser.add_argument(
+        "--elevation",
+        type=elevation_arg,
+        default="auto",
+        help="camera elevation, degrees, or 'auto' (default)",
+    )
+    parser.add_argument(
+        "--blend",
+        choices=("linear", "nearest"),
+        default="linear",
+        help="pixels both seeds see: cross-dissolve by angle, or the nearer seed alone",
+    )
+    parser.add_argument(
+        "--silhouette",
+        action="store_true",
+        help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
+    )
+    parser.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
+
+
+def synthesis_options(args: argparse.Namespace) -> SynthesisOptions:
+    """The :class:`~torch_eigview.synthesis.SynthesisOptions` of :func:`add_synthesis_arguments`'s flags."""
+    from torch_eigview.synthesis import SynthesisOptions
+
+    return SynthesisOptions(
+        flow=args.flow,
+        elevation=args.elevation,
+        extent=not args.no_extent,
+        blend=args.blend,
+        silhouette=args.silhouette,
+    )
 
 
 def format_table(result: CoilResult, title: str) -> str:
@@ -186,7 +205,6 @@ def run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.apps.experiment import CoilExperiment
     from torch_eigview.datasets.coil import CoilFolder, find_coil_root
     from torch_eigview.io.checkpoint import save_recognizer
-    from torch_eigview.synthesis import SynthesisOptions
 
     check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
     folder = CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit, device=_device(args.device))
@@ -201,13 +219,7 @@ def run_coil(args: argparse.Namespace) -> int:
         method=args.method,
         objects=args.objects,
         unit_norm=not args.no_unit_norm,
-        synthesis=SynthesisOptions(
-            flow=args.flow,
-            elevation=args.elevation,
-            extent=not args.no_extent,
-            blend=args.blend,
-            silhouette=args.silhouette,
-        ),
+        synthesis=synthesis_options(args),
         kernel=args.kernel,
         gamma=args.gamma,
         seeds=args.seeds,

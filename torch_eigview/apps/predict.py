@@ -1,4 +1,4 @@
-"""``eigview predict``: recognition with an exported ONNX model, without torch.
+"""``eigview predict``: recognition with an exported ONNX model, without torch, or with a model file.
 
 Imports onnxruntime, numpy and scikit-image only (``import torch_eigview`` is lazy), so it
 runs where torch is not installed. Images are read as :class:`~torch_eigview.datasets.coil.CoilFolder`
@@ -9,9 +9,17 @@ label index outside its names or a non-finite distance, is reported on stderr an
 go on (exit status 1 if any failed, 0 otherwise, 2 for a bad model or bad arguments). The
 graph is checked before onnxruntime runs it (:mod:`torch_eigview.io.onnx_check`).
 
+A model exported from an ``eigview fit`` model carries its preprocessing in its metadata
+(:class:`~torch_eigview.io.preprocessing.Preprocessing`): each image is then converted to
+the model's channels and resized to its size (:func:`~torch_eigview.io.preprocessing.prepare_array`)
+instead of having to match them. ``--model model.pt`` runs the model file itself with torch
+(:class:`~torch_eigview.apps.predict_model.ModelRecognizer`), with the same preprocessing
+as ``eigview evaluate``.
+
 Usage::
 
     eigview predict --onnx model.onnx obj1__0.png obj2__0.png --json predictions.json
+    eigview predict --model model.pt photo1.jpg photo2.png
     eigview predict --onnx model.onnx --reject photo.png   # "unknown" for rejected images
     python -m torch_eigview.apps.predict --onnx model.onnx IMAGES...
 """
@@ -33,6 +41,7 @@ from torch_eigview.io.images import check_regular_file, read_image, to_unit_floa
 from torch_eigview.io.onnx_check import check_recognizer_graph
 from torch_eigview.io.onnx_checksum import verify_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.io.preprocessing import prepare_array
 from torch_eigview.lazy import require
 
 __all__ = ["OnnxRecognizer", "Prediction", "add_arguments", "escape", "main", "read_info", "run"]
@@ -105,12 +114,19 @@ class OnnxRecognizer:
         self.input_name = self.session.get_inputs()[0].name
 
     def load(self, path: str) -> np.ndarray:
-        """Reads one image as (C, H, W) float32 in [0, 1], checked against the model's input size.
+        """Reads one image as (C, H, W) float32 in [0, 1]: preprocessed as the model's metadata
+        says, else checked against the model's input size.
 
         Raises:
-            ValueError: not a regular file, unreadable, or a shape other than the model's (C, H, W).
+            ValueError: not a regular file, unreadable, or (without preprocessing) a shape
+                other than the model's (C, H, W).
         """
         arr = read_image(path)
+        if self.info.preprocessing is not None:
+            try:
+                return prepare_array(to_unit_float(arr, np.float32), self.info.preprocessing)
+            except ValueError as exc:
+                raise ValueError(f"image {path}: {exc}") from None
         if tuple(arr.shape) != self.info.image_shape:
             raise ValueError(
                 f"image {path} has shape (C, H, W)={tuple(arr.shape)}, but the model expects "
@@ -177,8 +193,12 @@ def read_info(path: str) -> OnnxModelInfo:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``eigview predict`` (shared by the CLI and ``python -m``)."""
-    parser.add_argument(
-        "--onnx", required=True, metavar="FILE", help="model from 'eigview export --recognizer'"
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--onnx", metavar="FILE", help="model from 'eigview export --recognizer'")
+    source.add_argument(
+        "--model",
+        metavar="FILE",
+        help="model file of 'eigview fit' (or 'eigview coil --save'), run with torch",
     )
     parser.add_argument(
         "images", nargs="+", metavar="IMAGE", help="image files, each (C, H, W) like the model's"
@@ -194,7 +214,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--debug-modules", action="store_true", help=argparse.SUPPRESS)
 
 
-def _batches(model: OnnxRecognizer, paths: Sequence[str]) -> Iterator[tuple[np.ndarray, list[str], int]]:
+def _batches(model: Any, paths: Sequence[str]) -> Iterator[tuple[np.ndarray, list[str], int]]:
     """Images decoded ``_BATCH`` at a time (memory flat in the number of files): each batch
     as (B, C, H, W) float32, its file names and how many files failed (reported on stderr)."""
     for start in range(0, len(paths), _BATCH):
@@ -219,13 +239,19 @@ def run(args: argparse.Namespace) -> int:
         ValueError: the model cannot be used (the caller reports it, exit status 2).
     """
     if args.json:  # before any image is read: a bad path must not cost the run
-        inputs = [("--onnx", args.onnx), *(("IMAGE", path) for path in args.images)]
+        inputs = [("--onnx", args.onnx), ("--model", args.model), *(("IMAGE", path) for path in args.images)]
         check_output_path(args.json, "--json", inputs=inputs)
-    model = OnnxRecognizer(args.onnx)
+    model: Any
+    if args.model is not None:
+        from torch_eigview.apps.predict_model import ModelRecognizer  # imports torch
+
+        model = ModelRecognizer(args.model)
+    else:
+        model = OnnxRecognizer(args.onnx)
     if args.reject and not model.info.reject:
         raise ValueError(
-            f"--reject needs a model with rejection thresholds (a 'known' output); ONNX model "
-            f"{args.onnx!r} has none: fit it with rejection calibrated and export it again"
+            f"--reject needs a model with rejection thresholds (for ONNX a 'known' output); model "
+            f"{args.model or args.onnx!r} has none: fit it with rejection calibrated (and export it again)"
         )
     predictions: list[Prediction] = []
     n_failed = 0

@@ -25,7 +25,7 @@ from torch_eigview.datasets.correspondence import (
     seen_error,
     view_correspondence,
 )
-from torch_eigview.datasets.image_views import ViewDataset
+from torch_eigview.datasets.image_views import ViewDataset, read_view
 from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
 from torch_eigview.datasets.renderer import Render, render, render_views
 from torch_eigview.datasets.shapes import SHAPES, SyntheticObject, make_object
@@ -53,6 +53,7 @@ __all__ = [
     "make_camera",
     "make_object",
     "parse_object_spec",
+    "read_view",
     "render",
     "render_views",
     "seen_error",

@@ -7,6 +7,7 @@ and ``eigview predict`` do, so a COIL view is the same tensor whichever way it i
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -17,10 +18,10 @@ from torch.utils.data import Dataset
 
 from torch_eigview.check import check_int
 from torch_eigview.datasets.background import BackgroundModel
-from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
+from torch_eigview.datasets.manifest import ViewManifest
 from torch_eigview.io.images import read_image, to_unit_float
 
-__all__ = ["ViewDataset"]
+__all__ = ["ViewDataset", "read_view"]
 
 # ITU-R BT.709 luma, the weights of skimage.color.rgb2gray.
 _LUMA = (0.2125, 0.7154, 0.0721)
@@ -120,15 +121,15 @@ class ViewDataset(Dataset[dict[str, Any]]):
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         entry = self.manifest[index]
-        image, mask, given = self._read(entry)
-        if self.size is not None:
-            image, mask = _resize(image, mask, self.size)
-        if self.background is not None:
-            try:
-                out, fg = self.background.apply(image[None], mask[None] if given else None)
-            except ValueError as exc:
-                raise ValueError(f"{entry.source}: {entry.path}: {exc}") from None
-            image, mask = out[0], fg[0]
+        image, mask = read_view(
+            entry.path,
+            entry.mask,
+            size=self.size,
+            channels=self.channels,
+            dtype=self.dtype,
+            source=entry.source,
+            background=self.background,
+        )
         return {
             "image": image,
             "mask": mask,
@@ -137,32 +138,73 @@ class ViewDataset(Dataset[dict[str, Any]]):
             "elevation": float(entry.elevation),
         }
 
-    def _read(self, entry: ViewEntry) -> tuple[torch.Tensor, torch.Tensor, bool]:
-        """The image ``(C, H, W)`` and mask ``(1, H, W)`` bool of ``entry``, at the file's size,
-        and whether the mask was given (a mask file or alpha) rather than all True."""
-        try:
-            arr = read_image(entry.path, keep_alpha=True)
-            alpha = arr[-1:] if arr.shape[0] in (2, 4) else None
-            colour = arr[:-1] if alpha is not None else arr
-            if entry.mask is not None:
-                mask = read_image(entry.mask).any(axis=0, keepdims=True)
-                if mask.shape[1:] != colour.shape[1:]:
-                    raise ValueError(
-                        f"mask {entry.mask} has size (H, W)={mask.shape[1:]}, its image {entry.path} "
-                        f"{colour.shape[1:]}: they must match"
-                    )
-            elif alpha is not None:
-                mask = alpha > 0
-            else:
-                mask = np.ones((1, *colour.shape[1:]), dtype=bool)
-        except ValueError as exc:
-            raise ValueError(f"{entry.source}: {exc}") from None
-        work = np.float64 if self.dtype == torch.float64 else np.float32
-        image = torch.from_numpy(to_unit_float(colour, work)).to(self.dtype)
-        if self.channels == 3 and image.shape[0] == 1:
-            image = image.expand(3, -1, -1).clone()
-        elif self.channels == 1 and image.shape[0] == 3:
-            weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
-            image = (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
-        given = entry.mask is not None or alpha is not None
-        return image, torch.from_numpy(np.ascontiguousarray(mask)), given
+
+def read_view(
+    path: str | os.PathLike[str],
+    mask: str | os.PathLike[str] | None = None,
+    *,
+    size: Sequence[int] | None = None,
+    channels: int | None = None,
+    dtype: torch.dtype = torch.float32,
+    source: str | None = None,
+    background: BackgroundModel | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """One image file and its mask as :class:`ViewDataset` gives them (``eigview predict`` reads so too).
+
+    Args:
+        path: The image file.
+        mask: Its mask image (non-zero is object), or None (the alpha channel, else all True).
+        size, channels, dtype: As :class:`ViewDataset`'s.
+        source: Where the file was listed (a manifest line), prefixed to errors (the
+            messages name the files in any case).
+        background: As :class:`ViewDataset`'s: None gives the image as read; a
+            :class:`~torch_eigview.datasets.background.BackgroundModel` estimates the mask
+            of a view without one and sets the background to its ``fill``, after resizing.
+
+    Returns:
+        ``(image, mask)``: ``(C, H, W)`` of ``dtype`` in ``[0, 1]`` and ``(1, H, W)`` bool.
+
+    Raises:
+        ValueError: The image or mask cannot be read, the mask's size differs from the
+            image's, or (with ``background``) the mask is all background or the background
+            colour leaves no object; the message names ``source`` and the files.
+    """
+    hw = _check_size(size)
+    try:
+        arr = read_image(path, keep_alpha=True)
+        alpha = arr[-1:] if arr.shape[0] in (2, 4) else None
+        colour = arr[:-1] if alpha is not None else arr
+        if mask is not None:
+            found = read_image(mask).any(axis=0, keepdims=True)
+            if found.shape[1:] != colour.shape[1:]:
+                raise ValueError(
+                    f"mask {mask} has size (H, W)={found.shape[1:]}, its image {path} "
+                    f"{colour.shape[1:]}: they must match"
+                )
+        elif alpha is not None:
+            found = alpha > 0
+        else:
+            found = np.ones((1, *colour.shape[1:]), dtype=bool)
+    except ValueError as exc:
+        if source is None:
+            raise
+        raise ValueError(f"{source}: {exc}") from None
+    work = np.float64 if dtype == torch.float64 else np.float32
+    image = torch.from_numpy(to_unit_float(colour, work)).to(dtype)
+    if channels == 3 and image.shape[0] == 1:
+        image = image.expand(3, -1, -1).clone()
+    elif channels == 1 and image.shape[0] == 3:
+        weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
+        image = (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
+    out = torch.from_numpy(np.ascontiguousarray(found))
+    if hw is not None:
+        image, out = _resize(image, out, hw)
+    if background is None:
+        return image, out
+    given = mask is not None or alpha is not None
+    try:
+        masked, fg = background.apply(image[None], out[None] if given else None)
+    except ValueError as exc:
+        where = f"{source}: {path}" if source is not None else str(path)
+        raise ValueError(f"{where}: {exc}") from None
+    return masked[0], fg[0]

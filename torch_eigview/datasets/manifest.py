@@ -91,8 +91,11 @@ def _entry(
     return ViewEntry(path=path, object=obj.strip(), azimuth=az, elevation=el, mask=mask, source=where)
 
 
-def _csv_entries(manifest: Path) -> list[ViewEntry]:
-    """The entries of a CSV manifest, each checked; errors name the file and the line."""
+def _csv_entries(manifest: Path, skipped: list[str] | None = None) -> list[ViewEntry]:
+    """The entries of a CSV manifest, each checked; errors name the file and the line.
+
+    With ``skipped``, a bad line's error message is appended to it and the line left out
+    (a bad header still raises)."""
     base = manifest.parent
     try:
         handle = manifest.open(newline="", encoding="utf-8-sig")  # utf-8-sig: spreadsheets write a BOM
@@ -113,23 +116,26 @@ def _csv_entries(manifest: Path) -> list[ViewEntry]:
             where = f"{manifest} line {reader.line_num}"
             if not any(cell.strip() for cell in row):
                 continue  # blank lines separate groups in hand-written manifests
-            if len(row) != len(header):
-                raise ValueError(f"{where}: has {len(row)} fields, the header {len(header)}")
-            cells = {name: row[i].strip() for name, i in col.items()}
-            if not cells["path"]:
-                raise ValueError(f"{where}: path must name an image file, got an empty field")
-            mask = base / cells["mask"] if cells.get("mask") else None
-            entries.append(
-                _entry(
-                    base / cells["path"],
-                    cells["object"],
-                    cells["azimuth"],
-                    cells.get("elevation"),
-                    mask,
-                    where,
-                )
-            )
+            try:
+                entries.append(_row_entry(header, row, col, base, where))
+            except ValueError as exc:
+                if skipped is None:
+                    raise
+                skipped.append(str(exc))
     return entries
+
+
+def _row_entry(header: list[str], row: list[str], col: dict[str, int], base: Path, where: str) -> ViewEntry:
+    """The checked entry of one CSV row."""
+    if len(row) != len(header):
+        raise ValueError(f"{where}: has {len(row)} fields, the header {len(header)}")
+    cells = {name: row[i].strip() for name, i in col.items()}
+    if not cells["path"]:
+        raise ValueError(f"{where}: path must name an image file, got an empty field")
+    mask = base / cells["mask"] if cells.get("mask") else None
+    return _entry(
+        base / cells["path"], cells["object"], cells["azimuth"], cells.get("elevation"), mask, where
+    )
 
 
 def _literal(pattern: str, text: str) -> str:
@@ -192,32 +198,48 @@ class ViewManifest:
     Args:
         entries: The views, in their listed order.
         name: What the views came from, for ``repr`` and errors.
+        skipped: None (a bad entry raises), or a list that collects the error message of
+            each bad entry, which is then left out (``eigview evaluate`` goes on past a bad
+            row); here, the second of two entries that name the same view.
 
     Raises:
         ValueError: No entry, or two entries name the same view (the message names both).
     """
 
-    def __init__(self, entries: Sequence[ViewEntry], name: str = "manifest") -> None:
+    def __init__(
+        self, entries: Sequence[ViewEntry], name: str = "manifest", *, skipped: list[str] | None = None
+    ) -> None:
         entries = list(entries)
         if not entries:
             raise ValueError(f"{name} lists no view")
         if not all(isinstance(e, ViewEntry) for e in entries):
             raise TypeError("entries must all be ViewEntry")
         seen: dict[tuple[str, float, float | None], ViewEntry] = {}
+        kept = []
         for e in entries:
             key = (e.object, e.azimuth, None if math.isnan(e.elevation) else e.elevation)
             if key in seen:
-                raise ValueError(
+                message = (
                     f"{e.source}: duplicates the view of {seen[key].source} (object {e.object!r}, "
                     f"azimuth {e.azimuth:g}, elevation {e.elevation:g}): {e.path} and {seen[key].path}"
                 )
+                if skipped is None:
+                    raise ValueError(message)
+                skipped.append(message)
+                continue
             seen[key] = e
-        self.entries: list[ViewEntry] = entries
+            kept.append(e)
+        self.entries: list[ViewEntry] = kept
         self.name = name
 
     @classmethod
-    def from_csv(cls, path: str | os.PathLike[str]) -> ViewManifest:
+    def from_csv(cls, path: str | os.PathLike[str], *, skipped: list[str] | None = None) -> ViewManifest:
         """Reads a CSV manifest (see the module docstring).
+
+        Args:
+            path: The CSV file.
+            skipped: None (a bad line raises), or a list that collects the error of each
+                bad line (naming the manifest and the line), which is left out.
 
         Raises:
             TypeError: ``path`` is not a path.
@@ -229,7 +251,7 @@ class ViewManifest:
             raise TypeError(f"path must be a str or a path, got {type(path).__name__}")
         manifest = Path(path)
         check_regular_file(manifest, "manifest")
-        return cls(_csv_entries(manifest), name=str(manifest))
+        return cls(_csv_entries(manifest, skipped), name=str(manifest), skipped=skipped)
 
     @classmethod
     def from_pattern(cls, root: str | os.PathLike[str], pattern: str) -> ViewManifest:

@@ -31,6 +31,9 @@ def invert_row_map(
     camera; where segments overlap the one nearest the camera (largest ``depth``) wins,
     like a z-buffer. A segment with a non-finite end (map or depth) is left out.
 
+    Only the segments that pass these tests are rasterized (a view's background has
+    none), all rows, angles and objects of the batch in one flat pass.
+
     Args:
         dst_x_for_src: (B, T, H, W) forward map x3(x1) in pixels.
         valid: (B, H, W) or (B, T, H, W) bool, source pixels with a trusted correspondence.
@@ -54,14 +57,10 @@ def invert_row_map(
     if depth is not None:
         finite &= torch.isfinite(depth)
     seg_ok &= finite[..., :-1] & finite[..., 1:]
-    # Target columns of a segment: the integers in [f0, f1] inside the image, from col0 on;
-    # slot m is column col0 + m and exists iff m <= room (at most W slots, whatever the span).
-    col0 = torch.ceil(f0).clamp(min=0)
-    room = torch.where(seg_ok, torch.floor(f1).clamp(max=w - 1) - col0, -1.0)
-    parts = _segment_columns(f0, length, depth, col0, room)
+    parts = _segment_columns(dst_x_for_src, depth, seg_ok)
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
-    # Both reductions are maxima, so the parts (slot 0, then the few longer segments) are
-    # scattered one after the other, never concatenated.
+    # Both reductions are maxima, so the parts (one per slot) are scattered one after the
+    # other, never concatenated.
     best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
     for idx, key, _ in parts:
         best.scatter_reduce_(0, idx, key, reduce="amax")
@@ -73,64 +72,83 @@ def invert_row_map(
     return torch.where(hit, out[:n], math.nan).view(b, t, h, w), hit.view(b, t, h, w)
 
 
-def _interpolate(
-    frac: torch.Tensor, lo: torch.Tensor, d0: torch.Tensor | None, d1: torch.Tensor | None
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Source column ``lo + frac`` inside a segment and its z-buffer key (the depth
-    interpolated, or the source column itself without depth)."""
-    src = lo + frac
-    key = src if d0 is None or d1 is None else d0 + (d1 - d0) * frac
-    return src, key
-
-
 def _segment_columns(
-    f0: torch.Tensor, length: torch.Tensor, depth: torch.Tensor | None, col0: torch.Tensor, room: torch.Tensor
+    dst: torch.Tensor, depth: torch.Tensor | None, seg_ok: torch.Tensor
 ) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
-    Segment k of a row (source pixels k, k + 1) starts at target column ``f0`` and spans
-    ``length`` columns; it covers the integer columns ``col0 + m`` for ``0 <= m <= room``
-    (all (B, T, H, W - 1); ``room`` -1 for none). ``depth`` (B, T, H, W) or None.
+    Segment k of a row (source pixels k, k + 1) starts at target column ``f0 = dst[k]``
+    and ends at ``f1 = dst[k + 1]``; it covers the integer columns ``col0 + m`` inside the
+    image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``. When most segments
+    pass (a view's object fills it) slot 0 is computed for all of them on views of the
+    map, a refused one sending key -inf to a spare pixel; when few do (a background around
+    the object) only those are gathered. Slots m >= 1 gather the few segments that reach
+    them (views foreshorten).
+
+    Args:
+        dst: (B, T, H, W) forward map; ``depth`` the same shape or None.
+        seg_ok: (B, T, H, W - 1) bool, the segments to rasterize.
 
     Returns:
-        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel (B·T·H·W, a
-        spare slot, with key -inf where slot 0 is no target column), the z-buffer key and
-        the source column.
+        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel in
+        B·T·H·W (or the spare pixel B·T·H·W), the z-buffer key and the source column.
     """
-    b, t, h, w1 = f0.shape
-    w = w1 + 1
-    dtype, device = f0.dtype, f0.device
-    n = b * t * h * w
-    # Slot 0, every segment at once (most segments cover at most one column: views
-    # foreshorten).
-    lo_col = torch.arange(w - 1, dtype=dtype, device=device)
+    b, t, h, w = dst.shape
+    dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
+    fields = [dst] if depth is None else [dst, depth]
+    seg = None
+    if 2 * int(seg_ok.sum()) >= seg_ok.numel():
+        ends = [(v[..., :-1], v[..., 1:]) for v in fields]
+        k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
+        row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
+    else:
+        seg = seg_ok.reshape(-1).nonzero().squeeze(1)
+        left = seg + seg // w1  # source pixel k of the segment, flat in (B, T, H, W)
+        ends = [
+            (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
+        ]
+        k, row_start = (seg % w1).to(dtype), (seg // w1) * w
+    (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
+    length = f1 - f0
+    col0 = torch.ceil(f0).clamp(min=0)
+    room = torch.floor(f1).clamp(max=w - 1) - col0
+    if seg is None:
+        room = torch.where(seg_ok, room, -1.0)
     ok0 = room >= 0
-    frac0 = (col0 - f0) / length
-    d0 = None if depth is None else depth[..., :-1]
-    d1 = None if depth is None else depth[..., 1:]
-    src0, key0 = _interpolate(frac0, lo_col, d0, d1)
-    row0 = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
-    idx0 = torch.where(ok0, row0 + col0.clamp(max=w - 1).long(), n).reshape(-1)
-    key0 = torch.where(ok0, key0, -math.inf).reshape(-1)
-    src0 = src0.reshape(-1)
-    # Slots m >= 1: only the few segments longer than a pixel, gathered.
-    room_flat, col0_flat = room.reshape(-1), col0.reshape(-1)
-    idx_parts, key_parts, src_parts = [idx0], [key0], [src0]
-    cand = (room_flat >= 1).nonzero().squeeze(1)
+    src0, key0 = _interpolate((col0 - f0) / length, k, dd)
+    idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
+    parts = [(idx0, torch.where(ok0, key0, -math.inf).reshape(-1), src0.reshape(-1))]
+    flat = [v.reshape(-1) for v in (col0, f0, length, room)]
+    flat_depth = None if dd is None else (dd[0].reshape(-1), dd[1].reshape(-1))
+    cand = (flat[3] >= 1).nonzero().squeeze(1)
     m = 1
     while cand.numel():
-        seg, col = cand, col0_flat.index_select(0, cand) + m
-        frac = (col - f0.reshape(-1).index_select(0, seg)) / length.reshape(-1).index_select(0, seg)
-        lo = (seg % (w - 1)).to(dtype)
-        dd0 = None if d0 is None else d0.reshape(-1).index_select(0, seg)
-        dd1 = None if d1 is None else d1.reshape(-1).index_select(0, seg)
-        src_m, key_m = _interpolate(frac, lo, dd0, dd1)
-        idx_parts.append((seg // (w - 1)) * w + col.long())
-        key_parts.append(key_m)
-        src_parts.append(src_m)
+        c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
+        col = c0 + m
+        if seg is None:
+            lo, start = (cand % w1).to(dtype), (cand // w1) * w
+        else:
+            lo, start = k.index_select(0, cand), row_start.index_select(0, cand)
+        sel = (
+            None
+            if flat_depth is None
+            else (flat_depth[0].index_select(0, cand), flat_depth[1].index_select(0, cand))
+        )
+        src_m, key_m = _interpolate((col - s0) / ln, lo, sel)
+        parts.append((start + col.long(), key_m, src_m))
         m += 1
-        cand = cand[room_flat.index_select(0, cand) >= m]
-    return list(zip(idx_parts, key_parts, src_parts, strict=True))
+        cand = cand[flat[3].index_select(0, cand) >= m]
+    return parts
+
+
+def _interpolate(
+    frac: torch.Tensor, lo: torch.Tensor, depth: tuple[torch.Tensor, torch.Tensor] | None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Source column ``lo + frac`` inside a segment and its z-buffer key (the depth of its
+    ends ``depth`` interpolated, or the source column itself without depth)."""
+    src = lo + frac
+    key = src if depth is None else depth[0] + (depth[1] - depth[0]) * frac
+    return src, key
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
@@ -148,29 +166,44 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
         (..., W) the map with its holes filled (a new tensor).
     """
     w = src.shape[-1]
-    # Only the holes are computed (a warp's map is mostly hits); the nearest hit before and
-    # after each comes from a running max / min over the row, in int32 to halve the traffic.
-    holes = (~hit).reshape(-1).nonzero().squeeze(1)
-    out = src.reshape(-1).clone()
-    if holes.numel() == 0:
-        return out.view(src.shape)
+    n_holes = int((~hit).sum())
+    if n_holes == 0:
+        return src.clone()
+    # The nearest hit before and after each pixel: a running max / min over the row.
     cols = torch.arange(w, dtype=torch.int32, device=src.device)
-    prev = torch.where(hit, cols, -1).cummax(dim=-1).values.reshape(-1).index_select(0, holes).long()
+    prev = torch.where(hit, cols, -1).cummax(dim=-1).values
     nxt = torch.where(hit, cols, w).flip(-1).cummin(dim=-1).values.flip(-1)
-    nxt = nxt.reshape(-1).index_select(0, holes).long()
+    fb = fallback.expand_as(src)
+    if 2 * n_holes >= hit.numel():
+        # Mostly holes (a background around the object): every pixel, gathered along rows.
+        p, n = prev.long(), nxt.long()
+        taps = [v.gather(-1, i.clamp(0, w - 1)) for v in (src, fb) for i in (p, n)]
+        filled = _fill_values(p, n, cols.long(), taps, fb, w)
+        return torch.where(hit, src, filled)
+    # Mostly hits (a warp's map): the holes alone, gathered flat.
+    holes = (~hit).reshape(-1).nonzero().squeeze(1)
     col = holes % w
     row = holes - col
-    has_prev, has_next = prev >= 0, nxt < w
-    p, n = prev.clamp(0, w - 1), nxt.clamp(0, w - 1)
-    flat_src = src.reshape(-1)
-    fb = fallback.expand_as(src)
-    sp, sn = flat_src.index_select(0, row + p), flat_src.index_select(0, row + n)
-    fp, fn, f0 = (torch.take(fb, row + k) for k in (p, n, col))
-    span = (n - p).clamp_min(1).to(src.dtype)
-    between = sp + (sn - sp) * (col - p).to(src.dtype) / span
+    p, n = (v.reshape(-1).index_select(0, holes).long() for v in (prev, nxt))
+    flat = (src.reshape(-1), fb.contiguous().reshape(-1))  # one copy, not one per gather
+    taps = [v.index_select(0, row + i.clamp(0, w - 1)) for v in flat for i in (p, n)]
+    out = src.reshape(-1).clone()
+    out.index_put_((holes,), _fill_values(p, n, col, taps, flat[1].index_select(0, holes), w))
+    return out.view(src.shape)
+
+
+def _fill_values(
+    p: torch.Tensor, n: torch.Tensor, col: torch.Tensor, taps: list[torch.Tensor], f0: torch.Tensor, w: int
+) -> torch.Tensor:
+    """The filled value at column ``col`` from its previous hit ``p`` (-1: none) and next
+    hit ``n`` (``w``: none); ``taps`` are the map and the fallback at the clamped p and n,
+    ``f0`` the fallback at ``col``. All of one shape."""
+    sp, sn, fp, fn = taps
+    has_prev, has_next = p >= 0, n < w
+    p, n = p.clamp(0, w - 1), n.clamp(0, w - 1)
+    span = (n - p).clamp_min(1).to(sp.dtype)
+    between = sp + (sn - sp) * (col - p).to(sp.dtype) / span
     left_only = f0 + (sp - fp)
     right_only = f0 + (sn - fn)
     filled = torch.where(has_prev & has_next, between, torch.where(has_prev, left_only, right_only))
-    filled = torch.where(has_prev | has_next, filled, f0)
-    out.index_put_((holes,), filled)
-    return out.view(src.shape)
+    return torch.where(has_prev | has_next, filled, f0)

@@ -1,4 +1,4 @@
-"""Input and output: checkpoints, ONNX export and its metadata, image reading.
+"""Input and output: checkpoints, ONNX export and its metadata, image reading and preprocessing.
 
 Names are imported lazily (PEP 562): ``torch_eigview.io.images`` and
 ``torch_eigview.io.onnx_metadata`` need no torch, so ``eigview predict`` stays torch-free.
@@ -21,6 +21,7 @@ if TYPE_CHECKING:
         read_metadata,
     )
     from torch_eigview.io.onnx_metadata import OnnxModelInfo
+    from torch_eigview.io.preprocessing import Preprocessing
 
 _SOURCES = {
     "load_recognizer": "checkpoint",
@@ -32,10 +33,12 @@ _SOURCES = {
     "export_recognizer": "onnx",
     "read_metadata": "onnx",
     "OnnxModelInfo": "onnx_metadata",
+    "Preprocessing": "preprocessing",
 }
 
 __all__ = [
     "OnnxModelInfo",
+    "Preprocessing",
     "compare_with_eager",
     "export_onnx",
     "export_projection",

@@ -19,6 +19,7 @@ onnx package (absolute imports); only running this file as a script would shadow
 from __future__ import annotations
 
 import copy
+import dataclasses
 import io
 import math
 import os
@@ -39,6 +40,7 @@ from torch_eigview.io.onnx_graphs import (
     projection_module,
 )
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.io.preprocessing import Preprocessing
 from torch_eigview.lazy import require
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -168,6 +170,7 @@ def export_onnx(
     image_shape: tuple[int, int, int] | None = None,
     example_input: torch.Tensor | None = None,
     dynamo: bool = True,
+    preprocessing: Preprocessing | None = None,
 ) -> OnnxModelInfo:
     """Exports a projection, a recognizer or any module on images to ONNX, with a dynamic batch axis.
 
@@ -190,6 +193,9 @@ def export_onnx(
             shape too. Default: random images of ``image_shape``.
         dynamo: True (default) uses the torch.export-based exporter; False the
             TorchScript-based one (the default of ``torch.onnx.export`` before torch 2.9).
+        preprocessing: what turns an image file into the graph's input (recorded by
+            ``eigview fit``), written into the metadata for ``eigview predict``; its
+            ``image_shape`` must be the graph's.
 
     Returns:
         The metadata written into the graph's ``metadata_props``; ``n_components`` is the
@@ -215,7 +221,16 @@ def export_onnx(
     # Above the installed onnx's newest opset the exporter would write another one silently.
     newest = onnx.defs.onnx_opset_version()
     opset_version = check_int(opset_version, "opset_version", minimum=MIN_OPSET, maximum=newest)
+    if preprocessing is not None and not isinstance(preprocessing, Preprocessing):
+        raise TypeError(f"preprocessing must be a Preprocessing or None, got {type(preprocessing).__name__}")
     module, info, outputs, sample = _prepare(model, fold, image_shape, example_input)
+    if preprocessing is not None:
+        if preprocessing.image_shape != info.image_shape:
+            raise ValueError(
+                f"preprocessing gives images (C, H, W)={preprocessing.image_shape}, but the model "
+                f"takes {info.image_shape}"
+            )
+        info = dataclasses.replace(info, preprocessing=preprocessing)
     _save_graph(_Graph(module).eval(), sample, outputs, opset_version, dynamo, info.to_props(), path)
     return info
 
@@ -277,11 +292,14 @@ def export_recognizer(
     *,
     opset_version: int = MIN_OPSET,
     dynamo: bool = True,
+    preprocessing: Preprocessing | None = None,
 ) -> OnnxModelInfo:
     """Exports a recognizer: images (B, C, H, W) → label index, pose, distance. See :func:`export_onnx`."""
     if not isinstance(recognizer, NearestNeighborRecognizer):
         raise TypeError(f"recognizer must be a NearestNeighborRecognizer, got {type(recognizer).__name__}")
-    return export_onnx(recognizer, path, opset_version=opset_version, dynamo=dynamo)
+    return export_onnx(
+        recognizer, path, opset_version=opset_version, dynamo=dynamo, preprocessing=preprocessing
+    )
 
 
 def read_metadata(path: str | os.PathLike[str]) -> OnnxModelInfo:

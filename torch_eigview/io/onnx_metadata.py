@@ -11,6 +11,8 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from torch_eigview.io.preprocessing import Preprocessing
+
 __all__ = ["FORMAT", "FORMAT_VERSION", "KINDS", "OnnxModelInfo"]
 
 FORMAT = "torch_eigview.io.onnx"
@@ -33,6 +35,9 @@ class OnnxModelInfo:
         module: class name of the exported module (``EigenProjection``, ``KernelProjection``, …).
         reject: a recognizer with rejection thresholds: the graph has a fourth output,
             ``known`` (B,) bool. Absent from the metadata of older files (False).
+        preprocessing: what turns an image file into the graph's input (size, channels,
+            background), when the model was fitted from a manifest (``eigview fit``); None
+            for a model that takes images of ``image_shape`` as they are.
     """
 
     kind: str
@@ -42,10 +47,11 @@ class OnnxModelInfo:
     label_names: tuple[str, ...] = ()
     module: str = ""
     reject: bool = False
+    preprocessing: Preprocessing | None = None
 
     def to_props(self) -> dict[str, str]:
         """The ``metadata_props`` string map."""
-        return {
+        props = {
             "format": FORMAT,
             "format_version": str(FORMAT_VERSION),
             "kind": self.kind,
@@ -56,6 +62,9 @@ class OnnxModelInfo:
             "label_names": json.dumps(list(self.label_names)),
             "reject": json.dumps(self.reject),
         }
+        if self.preprocessing is not None:  # absent, not null: older readers see the same keys
+            props["preprocessing"] = self.preprocessing.to_prop()
+        return props
 
     @classmethod
     def from_props(cls, props: Mapping[str, str], source: str = "the model") -> OnnxModelInfo:
@@ -92,6 +101,11 @@ class OnnxModelInfo:
                 raise ValueError(f"label_names {names!r} is not a list of strings")
             if not isinstance(unit_norm, bool):
                 raise ValueError(f"unit_norm {unit_norm!r} is not a bool")
+            prep = None
+            if "preprocessing" in props:
+                prep = Preprocessing.from_json(json.loads(props["preprocessing"]), "preprocessing")
+                if prep.image_shape != tuple(shape):
+                    raise ValueError(f"preprocessing gives images {prep.image_shape}, image_shape is {shape}")
         except (KeyError, ValueError) as exc:
             raise ValueError(f"{source} has damaged torch_eigview metadata: {exc}") from exc
         return cls(
@@ -102,4 +116,5 @@ class OnnxModelInfo:
             label_names=tuple(names),
             module=props.get("module", ""),
             reject=reject,
+            preprocessing=prep,
         )

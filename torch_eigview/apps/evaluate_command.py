@@ -1,0 +1,234 @@
+"""``eigview evaluate``: a model file against the views of a manifest.
+
+Every view of an object the model knows is recognized after the model's own
+preprocessing (:class:`~torch_eigview.io.preprocessing.Preprocessing`) and scored as
+``eigview coil`` scores its test views (:func:`~torch_eigview.apps.protocol.score`):
+accuracy, per-object accuracy, and the pose error (wrapped to (-180, 180]) of the correctly
+recognized views, mean and median. A bad row (a missing or corrupt file, a mask of
+another size, a non-numeric angle, a duplicate view) is reported with its manifest line
+and left out, and the others go on; the exit status is then 1. Views of objects the model
+does not know are counted apart (``unknown_objects``): they are what rejection is scored
+on, whose figures go in ``rejection`` (None while the recognizer has none).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from torch_eigview.apps.cli_args import add_quiet, add_threads
+from torch_eigview.apps.predict import escape
+from torch_eigview.apps.view_inputs import (
+    add_manifest_arguments,
+    label_table,
+    load_manifest,
+    load_model,
+    manifest_inputs,
+)
+from torch_eigview.files import check_outputs, write_json
+
+if TYPE_CHECKING:
+    import torch
+
+    from torch_eigview.datasets.manifest import ViewEntry
+    from torch_eigview.io.preprocessing import Preprocessing
+    from torch_eigview.nn.recognition import NearestNeighborRecognizer
+
+__all__ = ["Evaluation", "add_evaluate_command", "evaluate", "format_evaluation", "run_evaluate"]
+
+
+def add_evaluate_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Adds ``eigview evaluate`` and its options to the command's subparsers."""
+    ev = sub.add_parser("evaluate", help="score a model (eigview fit) on the views of a manifest")
+    ev.add_argument(
+        "--model", required=True, metavar="FILE", help="model file of eigview fit (or coil --save)"
+    )
+    add_manifest_arguments(ev)
+    ev.add_argument(
+        "--exclude-seeds", action="store_true", help="leave out the views at the model's seed azimuths"
+    )
+    ev.add_argument(
+        "--pose",
+        choices=("nearest", "interpolate"),
+        default="nearest",
+        help="the reported pose: the nearest gallery view's, or interpolated between its neighbours",
+    )
+    ev.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    add_quiet(ev)
+    add_threads(ev)
+
+
+@dataclass
+class Evaluation:
+    """The outcome of ``eigview evaluate``; :meth:`to_json` is its JSON record.
+
+    Attributes:
+        accuracy: correctly recognized views of known objects, % (NaN when none was read).
+        per_object: the same per object name.
+        pose_mean_deg, pose_median_deg: absolute pose error of the correctly recognized
+            views, degrees (NaN when none is).
+        n_test: the views scored.
+        skipped: ``{"row": manifest line or file, "error": message}`` of each row left out.
+        unknown_objects: views per object name that the model does not know.
+        rejection: the rejection figures, None while the recognizer rejects nothing.
+    """
+
+    accuracy: float
+    per_object: dict[str, float]
+    pose_mean_deg: float
+    pose_median_deg: float
+    n_test: int
+    skipped: list[dict[str, str]] = field(default_factory=list)
+    unknown_objects: dict[str, int] = field(default_factory=dict)
+    rejection: dict[str, Any] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        def finite(value: float) -> float | None:
+            return value if math.isfinite(value) else None
+
+        return {
+            "accuracy": finite(self.accuracy),
+            "per_object": self.per_object,
+            "pose_error_deg": {"mean": finite(self.pose_mean_deg), "median": finite(self.pose_median_deg)},
+            "n_test": self.n_test,
+            "skipped": self.skipped,
+            "unknown_objects": self.unknown_objects,
+            "rejection": self.rejection,
+        }
+
+
+def _skip(skipped: list[dict[str, str]], message: str) -> None:
+    """Records a bad row; the message starts with its manifest line (or file)."""
+    row, _, error = message.partition(": ")
+    skipped.append({"row": row, "error": error or message})
+
+
+def _tests(
+    groups: dict[str, list[ViewEntry]],
+    table: dict[str, int],
+    prep: Preprocessing,
+    dtype: torch.dtype,
+    skipped: list[dict[str, str]],
+) -> Iterator[tuple[str, int, torch.Tensor, torch.Tensor]]:
+    """Per known object its readable views (B, C, H, W) and true poses (B,), read lazily."""
+    import torch
+
+    from torch_eigview.apps.protocol import wrap_degrees
+    from torch_eigview.datasets.image_views import read_view
+
+    for obj, entries in groups.items():
+        images, poses = [], []
+        for e in entries:
+            try:
+                images.append(
+                    read_view(
+                        e.path, e.mask, size=prep.size, channels=prep.channels, dtype=dtype, source=e.source
+                    )[0]
+                )
+                poses.append(e.azimuth)
+            except ValueError as exc:
+                _skip(skipped, str(exc))
+        if images:
+            truth = wrap_degrees(torch.tensor(poses, dtype=torch.float64)).to(dtype)
+            yield obj, table[obj], torch.stack(images), truth
+
+
+def evaluate(
+    recognizer: NearestNeighborRecognizer,
+    prep: Preprocessing,
+    entries: list[ViewEntry],
+    *,
+    skipped: list[dict[str, str]] | None = None,
+    interpolate_pose: bool = False,
+) -> Evaluation:
+    """Recognizes and scores ``entries`` (a manifest's views) with a model and its preprocessing.
+
+    Args:
+        recognizer: the model's recognizer; its label names are the object names.
+        prep: the model's preprocessing.
+        entries: the views, grouped by object in the order of their first view.
+        skipped: rows already left out (bad manifest lines); unreadable views are added.
+        interpolate_pose: score the pose interpolated on the appearance manifold.
+
+    Raises:
+        ValueError: no view of an object the model knows could be read.
+    """
+    from torch_eigview.apps.protocol import score
+
+    skipped = [] if skipped is None else skipped
+    table = label_table(recognizer)
+    groups: dict[str, list[ViewEntry]] = {}
+    unknown: dict[str, int] = {}
+    for e in entries:
+        if e.object in table:
+            groups.setdefault(e.object, []).append(e)
+        else:
+            unknown[e.object] = unknown.get(e.object, 0) + 1
+    tests = _tests(groups, table, prep, recognizer.codes.dtype, skipped)  # one object in memory at a time
+    first = next(tests, None)
+    if first is None:
+        known = ", ".join(list(table)[:10])
+        raise ValueError(
+            f"no view of an object the model knows ({known}) could be read; {len(skipped)} rows skipped"
+        )
+    result = score(recognizer, itertools.chain([first], tests), wrap=True, interpolate_pose=interpolate_pose)
+    return Evaluation(
+        result.accuracy,
+        dict(result.per_object),
+        result.pose_mae_deg,
+        result.pose_median_deg,
+        result.n_test,
+        skipped,
+        unknown,
+    )
+
+
+def format_evaluation(ev: Evaluation, title: str) -> str:
+    """The per-object accuracy table, the total and the pose errors."""
+    lines = [title, f"{'object':>12} {'accuracy (%)':>13}"]
+    lines += [f"{escape(obj)[:12]:>12} {acc:13.2f}" for obj, acc in ev.per_object.items()]
+    lines.append(f"{'Total':>12} {ev.accuracy:13.2f}")
+    lines.append(
+        f"test images {ev.n_test}, pose error of correct matches: mean {ev.pose_mean_deg:.2f} deg, "
+        f"median {ev.pose_median_deg:.2f} deg"
+    )
+    if ev.unknown_objects:
+        lines.append(
+            f"views of objects the model does not know: {sum(ev.unknown_objects.values())} (not scored)"
+        )
+    if ev.skipped:
+        lines.append(f"rows skipped: {len(ev.skipped)} (listed on stderr)")
+    return "\n".join(lines)
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """Runs ``eigview evaluate``; returns 0, or 1 when rows were skipped."""
+    check_outputs([("--json", args.json)], inputs=[("--model", args.model), *manifest_inputs(args)])
+    recognizer, meta, prep = load_model(args.model)
+    bad_lines: list[str] = []
+    manifest = load_manifest(args, bad_lines)
+    skipped: list[dict[str, str]] = []
+    for message in bad_lines:
+        _skip(skipped, message)
+    entries = list(manifest)
+    if args.exclude_seeds:
+        if "seed_azimuths" not in meta:
+            raise ValueError(
+                f"--exclude-seeds needs the seed azimuths that eigview fit records; {args.model} has none"
+            )
+        seeds = [float(a) for a in meta["seed_azimuths"]]
+        entries = [
+            e for e in entries if not any(abs((e.azimuth - a + 180.0) % 360.0 - 180.0) <= 1e-6 for a in seeds)
+        ]
+    ev = evaluate(recognizer, prep, entries, skipped=skipped, interpolate_pose=args.pose == "interpolate")
+    for row in ev.skipped:
+        print(f"eigview evaluate: skipped {escape(row['row'])}: {escape(row['error'])}", file=sys.stderr)
+    print(format_evaluation(ev, f"eigview evaluate: {args.model} on {manifest.name}"))
+    if args.json:
+        write_json(args.json, {**ev.to_json(), "model": args.model, "manifest": manifest.name})
+    return 1 if ev.skipped else 0

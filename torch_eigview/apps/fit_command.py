@@ -1,0 +1,260 @@
+"""``eigview fit``: a recognizer from the seed views of any objects listed in a manifest.
+
+Per object, the views at the seed azimuths (``--seeds 0 10 [more]``, or ``--seeds M``: M
+views 360/M degrees apart from ``--center``) are picked from the manifest, the gallery is
+synthesized from them as ``eigview coil`` does (two seeds: the ``--synth`` range; more: Sec.
+4.1's sectors, the range extended past the last seed; M: the whole circle), and one
+eigenspace and nearest-neighbour gallery are fitted over every object. The model file
+(:func:`~torch_eigview.io.checkpoint.save_recognizer`: checksummed, written atomically) records
+the preprocessing (:class:`~torch_eigview.io.preprocessing.Preprocessing`), the object
+names as label names and the seed azimuths, for ``eigview evaluate`` and ``eigview predict``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from torch_eigview.apps.cli_args import (
+    add_quiet,
+    add_threads,
+    bounded_int_arg,
+    components_arg,
+    finite_arg,
+    progress_bar,
+)
+from torch_eigview.apps.coil_command import add_synthesis_arguments, synthesis_options
+from torch_eigview.apps.view_inputs import add_manifest_arguments, load_manifest, manifest_inputs
+from torch_eigview.files import check_outputs
+
+if TYPE_CHECKING:
+    import torch
+
+    from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
+    from torch_eigview.synthesis import SynthesisOptions
+
+__all__ = ["SeedPlan", "add_fit_command", "pick_seeds", "run_fit", "seed_plan"]
+
+_TOL = 1e-6  # degrees: two azimuths this close are one pose
+
+
+def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Adds ``eigview fit`` and its options to the command's subparsers."""
+    fit = sub.add_parser("fit", help="fit a recognizer from the seed views of the objects in a manifest")
+    add_manifest_arguments(fit)
+    fit.add_argument(
+        "--seeds",
+        type=finite_arg("--seeds"),
+        nargs="+",
+        required=True,
+        metavar="DEG",
+        help="azimuths of the seed views, degrees (two or more: e.g. 0 10), or one integer M: "
+        "M seed views 360/M degrees apart from --center (the full circle)",
+    )
+    fit.add_argument(
+        "--center", type=finite_arg("--center"), default=0.0, help="with --seeds M: the first seed's azimuth"
+    )
+    fit.add_argument(
+        "--synth",
+        type=finite_arg("--synth"),
+        nargs=3,
+        default=(-20.0, 20.0, 1.0),
+        metavar=("START", "STOP", "STEP"),
+        help="synthesized angles from the first seed for two seeds; each further seed extends the range "
+        "by its step; with --seeds M every STEP degrees round the circle",
+    )
+    fit.add_argument(
+        "--size",
+        type=bounded_int_arg("--size", 1, ("EIGVIEW_MAX_IMAGE_SIDE", 512)),
+        nargs=2,
+        default=None,
+        metavar=("H", "W"),
+        help="resize every image (and mask) to H x W (default: the seed views' own size)",
+    )
+    fit.add_argument(
+        "--channels",
+        type=int,
+        choices=(1, 3),
+        default=None,
+        help="1: gray, 3: RGB (default: the first view's)",
+    )
+    fit.add_argument(
+        "-k", "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
+    )
+    add_synthesis_arguments(fit)
+    fit.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
+    fit.add_argument("--out", required=True, metavar="FILE", help="the model file to write")
+    add_quiet(fit)
+    add_threads(fit)
+
+
+@dataclass(frozen=True)
+class SeedPlan:
+    """Where the seed views lie and which angles each object's gallery holds.
+
+    Attributes:
+        azimuths: the seed azimuths in degrees, in [0, 360), in the order of synthesis.
+        first: the first seed's azimuth in (-180, 180], the origin of the gallery's angles.
+        alpha: the angle between consecutive seeds (one number when equal, else Sec. 4.1's α_n).
+        thetas: the gallery angles from the first seed (two or more listed seeds), or None
+            for the full circle (every ``step`` round it).
+        step: the synthesis step in degrees.
+    """
+
+    azimuths: list[float]
+    first: float
+    alpha: float | list[float]
+    thetas: list[float] | None
+    step: float
+
+
+def _wrap(angle: float) -> float:
+    """An angle in degrees wrapped to (-180, 180], in float64."""
+    return 180.0 - (180.0 - float(angle)) % 360.0
+
+
+def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, float]) -> SeedPlan:
+    """The seed azimuths and gallery angles of ``--seeds``, ``--center`` and ``--synth``.
+
+    Raises:
+        ValueError: one value that is not an integer >= 3; listed seeds that repeat an
+            azimuth; a bad ``--synth`` range.
+    """
+    from torch_eigview.geometry.angles import angle_range
+
+    start, stop, step = synth
+    angle_range(start, stop, step, "--synth")  # names a bad range before any image is read
+    if len(seeds) == 1:
+        m = seeds[0]
+        if not (m.is_integer() and m >= 3):
+            raise ValueError(
+                f"--seeds {m:g}: one value is M, the number of seed views round the circle, an integer >= 3 "
+                "(M = 2 puts them 180 degrees apart, where Eq. 7's sin(alpha) is 0); or list two or more azimuths"
+            )
+        azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
+        return SeedPlan(azimuths, _wrap(center), 360.0 / m, None, step)
+    steps = [_wrap(b - a) for a, b in itertools.pairwise(seeds)]
+    if any(abs(s) < _TOL for s in steps):
+        raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")
+    equal = all(abs(s - steps[0]) < _TOL for s in steps)
+    # Each seed past the second extends the range on its side by its step (as CoilExperiment).
+    extra = (len(steps) - 1) * steps[0] if equal else sum(steps[1:])
+    thetas = angle_range(start + min(extra, 0.0), stop + max(extra, 0.0), step, "--synth")
+    alpha: float | list[float] = steps[0] if equal else steps
+    return SeedPlan([a % 360.0 for a in seeds], _wrap(seeds[0]), alpha, thetas, step)
+
+
+def _same_pose(a: float, b: float) -> bool:
+    return abs(_wrap(a - b)) <= _TOL
+
+
+def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[ViewEntry]:
+    """The views of ``obj`` at ``azimuths`` (degrees), in that order.
+
+    Raises:
+        ValueError: the object has fewer views than seeds, none or several (elevations)
+            at a seed azimuth; the message names the object, the manifest and what it has.
+    """
+    views = manifest.views(obj)
+    have = ", ".join(f"{v.azimuth:g}" for v in views[:24]) + (", ..." if len(views) > 24 else "")
+    if len(views) < len(azimuths):
+        raise ValueError(
+            f"object {obj!r} has {len(views)} view(s) in {manifest.name}, fewer than the {len(azimuths)} "
+            f"seeds: azimuths {have}"
+        )
+    picked = []
+    for az in azimuths:
+        found = [v for v in views if _same_pose(v.azimuth, az)]
+        if not found:
+            raise ValueError(
+                f"object {obj!r} has no view at the seed azimuth {az:g} degrees in {manifest.name}; "
+                f"it has azimuths {have}"
+            )
+        if len(found) > 1:
+            raise ValueError(
+                f"object {obj!r} has {len(found)} views at the seed azimuth {az:g} degrees (other elevations): "
+                f"{', '.join(v.source for v in found)}; list one per azimuth"
+            )
+        picked.append(found[0])
+    return picked
+
+
+def _gallery(
+    seeds: torch.Tensor, plan: SeedPlan, options: SynthesisOptions, obj: str
+) -> tuple[torch.Tensor, list[float]]:
+    """One object's synthesized gallery views and their poses (degrees, unwrapped)."""
+    from torch_eigview.apps.circle import synthesize_circle
+    from torch_eigview.synthesis import synthesize_views
+
+    try:
+        if plan.thetas is None:
+            out = synthesize_circle(seeds, plan.step, options)
+        else:
+            out = synthesize_views(seeds, plan.alpha, plan.thetas, options)
+    except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
+        raise ValueError(f"object {obj!r}: synthesis failed: {exc}") from exc
+    return out.views, [plan.first + t for t in out.thetas.tolist()]
+
+
+def _read_seeds(entries: list[ViewEntry], size: tuple[int, int] | None, channels: int | None) -> torch.Tensor:
+    """The seed views (V, C, H, W); without ``size`` they must share the first one's size."""
+    import torch
+
+    from torch_eigview.datasets.image_views import read_view
+
+    images = [read_view(e.path, e.mask, size=size, channels=channels, source=e.source)[0] for e in entries]
+    for e, image in zip(entries, images, strict=True):
+        if image.shape != images[0].shape:
+            raise ValueError(
+                f"{e.source}: image {e.path} is (C, H, W)={tuple(image.shape)}, the first seed view "
+                f"{entries[0].path} {tuple(images[0].shape)}; give --size H W (and --channels) to resize them"
+            )
+    return torch.stack(images)
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    """Runs ``eigview fit`` on parsed arguments; returns the exit status."""
+    from torch_eigview.apps.protocol import build_recognizer, stack_gallery, wrap_degrees
+    from torch_eigview.io.checkpoint import save_recognizer
+    from torch_eigview.io.preprocessing import Preprocessing
+
+    check_outputs([("--out", args.out)], inputs=manifest_inputs(args))
+    plan = seed_plan(list(args.seeds), args.center, tuple(args.synth))
+    manifest = load_manifest(args)
+    objects = manifest.objects
+    picked = {obj: pick_seeds(manifest, obj, plan.azimuths) for obj in objects}  # all checked first
+    size = None if args.size is None else (args.size[0], args.size[1])
+    first = _read_seeds(picked[objects[0]], size, args.channels)
+    size, channels = size or (first.shape[2], first.shape[3]), args.channels or first.shape[1]
+    options = synthesis_options(args)
+
+    def blocks() -> Iterator[tuple[torch.Tensor, int, list[float]]]:
+        loop = progress_bar(args.quiet, "fit objects", "obj")
+        for label, obj in enumerate(loop(objects) if loop else objects):
+            views, poses = _gallery(_read_seeds(picked[obj], size, channels), plan, options, obj)
+            yield views, label, poses
+
+    x, labels, poses = stack_gallery(blocks())
+    unit_norm = not args.no_unit_norm
+    recognizer = build_recognizer(
+        x, labels, wrap_degrees(poses), args.components, unit_norm=unit_norm, label_names=objects
+    )
+    prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm)
+    meta = {
+        "command": "fit",
+        "preprocessing": prep.to_json(),
+        "seed_azimuths": plan.azimuths,
+        "synth": list(args.synth),
+        "n_train_views": int(x.shape[0]),
+        "manifest": manifest.name,
+    }
+    save_recognizer(args.out, recognizer, meta)
+    k = recognizer.projection.n_components
+    print(
+        f"wrote {args.out}: {len(objects)} objects, {x.shape[0]} gallery views of (C, H, W)={tuple(x.shape[1:])}, "
+        f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees"
+    )
+    return 0

@@ -1,0 +1,80 @@
+"""``eigview predict --model model.pt``: a model file in torch, with ``eigview predict``'s interface.
+
+The images go through the model's recorded preprocessing exactly as ``eigview evaluate``
+reads its views (:func:`~torch_eigview.datasets.image_views.read_view`), so a file gives
+the same answer in either command.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from torch_eigview.apps.predict import Prediction
+from torch_eigview.apps.view_inputs import label_table, load_model
+from torch_eigview.datasets.image_views import read_view
+from torch_eigview.io.images import check_regular_file
+from torch_eigview.io.onnx_metadata import OnnxModelInfo
+
+__all__ = ["ModelRecognizer"]
+
+
+class ModelRecognizer:
+    """A model file of ``eigview fit`` (or ``eigview coil --save``) for ``eigview predict``.
+
+    Args:
+        path: the model file; its checksum is verified on load.
+
+    Attributes:
+        info: what the model takes and answers, as an exported graph's metadata would say.
+
+    Raises:
+        ValueError: the file is missing, damaged or not a recognizer's, or its
+            preprocessing record is.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = os.fspath(path)
+        check_regular_file(self.path, "model")
+        self.recognizer, _, self.prep = load_model(self.path)
+        self._names = {label: name for name, label in label_table(self.recognizer).items()}
+        self.info = OnnxModelInfo(
+            kind="recognizer",
+            image_shape=self.prep.image_shape,
+            n_components=int(self.recognizer.codes.shape[1]),
+            unit_norm=self.prep.unit_norm,
+            label_names=tuple(self._names.values()),
+            module=type(self.recognizer).__name__,
+            reject=self.recognizer.rejects,
+            preprocessing=self.prep,
+        )
+
+    def load(self, path: str) -> np.ndarray:
+        """One image as the model's input ``(C, H, W)`` float32, preprocessed as recorded.
+
+        Raises:
+            ValueError: not a regular file, or unreadable; the message names it.
+        """
+        image, _ = read_view(path, size=self.prep.size, channels=self.prep.channels, dtype=torch.float32)
+        return image.numpy()
+
+    def predict_rows(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction | str]:
+        """Recognizes (B, C, H, W) float32 ``images``; ``names`` are their files."""
+        x = torch.from_numpy(images).to(self.recognizer.codes.dtype)
+        with torch.no_grad():
+            result = self.recognizer.predict(x, reject=self.recognizer.rejects)
+        known = [None] * len(names) if result.known is None else result.known.tolist()
+        return [
+            Prediction(name, self._names[int(label)], float(pose), float(dist), ok)
+            for name, label, pose, dist, ok in zip(
+                names,
+                result.labels.tolist(),
+                result.poses.tolist(),
+                result.distances.tolist(),
+                known,
+                strict=True,
+            )
+        ]
