@@ -40,7 +40,7 @@ def roc(known: torch.Tensor, unknown: torch.Tensor) -> list[dict[str, float]]:
     ]
 
 
-def main(argv: list[str] | None = None) -> dict[str, object]:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--root", help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA)")
     parser.add_argument("--known", type=int, nargs="+", default=list(range(1, 11)), help="known objects")
@@ -51,6 +51,11 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     parser.add_argument("--reject-score", choices=("difs", "dffs", "both"), default="difs")
     parser.add_argument("--reject-poses", type=float, nargs=3, default=[-45.0, 45.0, 2.5])
     parser.add_argument("--json", help="write the ROC points and the operating point here")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> dict[str, object]:
+    parser = _parser()
     args = parser.parse_args(argv)
     try:  # a missing folder: say where the images go, not a traceback
         folder = CoilFolder(find_coil_root(args.root))

@@ -40,6 +40,7 @@ SUBPACKAGES = {
     "method": [
         "ALL_COMPONENTS",
         "FewViewEigenspace",
+        "calibrate_rejection",
         "resolve_components",
     ],
     "geometry": [

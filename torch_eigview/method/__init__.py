@@ -4,5 +4,6 @@ from __future__ import annotations
 
 from torch_eigview.method.estimator import FewViewEigenspace
 from torch_eigview.method.inputs import ALL_COMPONENTS, resolve_components
+from torch_eigview.method.rejection import calibrate_rejection
 
-__all__ = ["ALL_COMPONENTS", "FewViewEigenspace", "resolve_components"]
+__all__ = ["ALL_COMPONENTS", "FewViewEigenspace", "calibrate_rejection", "resolve_components"]
