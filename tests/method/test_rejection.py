@@ -101,6 +101,7 @@ def test_thresholds_are_buffers_that_round_trip(fitted: FewViewEigenspace, tmp_p
     assert torch.equal(loaded.reject_thresholds, rec.reject_thresholds)
 
 
+@pytest.mark.slow
 def test_onnx_known_equals_torch(fitted: FewViewEigenspace, tmp_path: Path) -> None:
     onnxruntime = pytest.importorskip("onnxruntime")
     from torch_eigview.io.onnx import export_recognizer
