@@ -29,6 +29,7 @@ from torch_eigview.method.inputs import (
     block_source,
     check_angles,
     check_labels,
+    check_seed_masks,
     check_seeds,
     check_synth,
     resolve_components,
@@ -119,7 +120,9 @@ class FewViewEigenspace:
         )
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, seeds: object, seed_angles: object, labels: object = None) -> FewViewEigenspace:
+    def fit(
+        self, seeds: object, seed_angles: object, labels: object = None, *, masks: object = None
+    ) -> FewViewEigenspace:
         """Synthesizes every object's gallery from its seed views and fits on all of them.
 
         Memory: the gallery views twice (P × N, and their unit-norm copy) plus the P×P
@@ -134,6 +137,12 @@ class FewViewEigenspace:
                 or one sequence per object. With ``synth``, V_o >= 2 and the angles are
                 equally spaced (either sign) or increasing (Sec. 4.1's α_n).
             labels: O int labels, default 0 … O − 1.
+            masks: optional foreground masks of the seed views, True on the object: an
+                (O, V, H, W) bool tensor or a sequence of O (V_o, H, W) ones (an entry
+                may be None). They replace the brightness threshold of synthesis
+                (silhouette-aware sampling, size normalization, the automatic elevation);
+                the seeds' background should already be one constant (e.g.
+                :class:`~torch_eigview.datasets.background.BackgroundModel`'s ``apply``).
 
         Returns:
             self, fitted: ``eigenspace_``, ``projection_``, ``recognizer_``,
@@ -147,11 +156,12 @@ class FewViewEigenspace:
         objects = check_seeds(seeds)
         angles = check_angles(seed_angles, objects)
         names = check_labels(labels, len(objects))
+        seed_masks = check_seed_masks(masks, objects)
         self.elevations_: list[list[float]] = []
         views: list[torch.Tensor] = []
         label_list: list[int] = []
         poses: list[float] = []
-        for block, label, block_poses in self._galleries(params, objects, angles, names):
+        for block, label, block_poses in self._galleries(params, objects, angles, names, seed_masks):
             views.append(block)
             label_list += [label] * len(block_poses)
             poses += block_poses
@@ -166,9 +176,10 @@ class FewViewEigenspace:
         objects: list[torch.Tensor],
         angles: list[list[float]],
         labels: list[int],
+        masks: list[torch.Tensor | None],
     ) -> Iterator[Gallery]:
         """Per object its gallery views, label and poses; appends its elevations to ``elevations_``."""
-        for views, seed_angles, label in zip(objects, angles, labels, strict=True):
+        for views, seed_angles, label, mask in zip(objects, angles, labels, masks, strict=True):
             if params.synth is None:
                 yield views, label, seed_angles
                 continue
@@ -179,7 +190,7 @@ class FewViewEigenspace:
             steps = seed_steps(seed_angles)
             alpha: float | list[float] = steps[0] if len(set(steps)) == 1 else steps
             thetas = params.thetas(steps)
-            out = synthesize_views(views, alpha, thetas, params.options)
+            out = synthesize_views(views, alpha, thetas, params.options, masks=mask)
             self.elevations_.append(out.elevations)
             yield out.views, label, [seed_angles[0] + t for t in thetas]
 

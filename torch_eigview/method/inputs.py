@@ -26,6 +26,7 @@ __all__ = [
     "block_source",
     "check_angles",
     "check_labels",
+    "check_seed_masks",
     "check_seeds",
     "check_synth",
     "resolve_components",
@@ -112,6 +113,46 @@ def check_seeds(seeds: object) -> list[torch.Tensor]:
                 f"like seeds[0], got shape {tuple(s.shape)} and dtype {s.dtype}"
             )
     return objects
+
+
+def check_seed_masks(masks: object, objects: list[torch.Tensor]) -> list[torch.Tensor | None]:
+    """Per object its (V_o, H, W) bool seed masks or None (the brightness threshold).
+
+    ``masks`` is None, an (O, V, H, W) bool tensor, or a sequence of O entries, each None
+    or a (V_o, H, W) bool tensor; every mask must show its object (a True pixel).
+    """
+    if masks is None:
+        return [None] * len(objects)
+    if isinstance(masks, torch.Tensor):
+        check_ndim(masks, "masks", (4,), "(O, V, H, W)")
+        per_object: list[object] = list(masks.detach().unbind(0))
+    elif isinstance(masks, Sequence) and not isinstance(masks, str):
+        per_object = list(masks)
+    else:
+        raise TypeError(
+            f"masks must be None, an (O, V, H, W) bool tensor or a sequence of (V, H, W) ones, got {type(masks).__name__}"
+        )
+    if len(per_object) != len(objects):
+        raise ValueError(f"masks must hold one entry per object ({len(objects)}), got {len(per_object)}")
+    out: list[torch.Tensor | None] = []
+    for i, (m, views) in enumerate(zip(per_object, objects, strict=True)):
+        if m is None:
+            out.append(None)
+            continue
+        if not isinstance(m, torch.Tensor) or m.dtype != torch.bool:
+            raise TypeError(f"masks[{i}] must be a bool tensor (True on the object) or None, got {m!r:.80}")
+        want = (views.shape[0], *views.shape[2:])
+        if tuple(m.shape) != want:
+            raise ValueError(
+                f"masks[{i}] must have shape (V, H, W) = {want} like seeds[{i}], got {tuple(m.shape)}"
+            )
+        empty = (~m.flatten(1).any(dim=1)).nonzero().flatten().tolist()
+        if empty:
+            raise ValueError(
+                f"masks[{i}][{empty[0]}] is all background (no True pixel): a view must show its object"
+            )
+        out.append(m.detach())
+    return out
 
 
 def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[float]]:
