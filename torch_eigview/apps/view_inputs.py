@@ -119,7 +119,7 @@ def background_model(prep: Preprocessing) -> BackgroundModel | None:
 
     if prep.background == "keep":
         return None
-    return BackgroundModel(background=prep.background_colour, tolerance=prep.tolerance)
+    return BackgroundModel(background=prep.colour, tolerance=prep.tolerance)
 
 
 def manifest_inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:

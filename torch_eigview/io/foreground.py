@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["Colour", "background_colours", "clean_mask", "estimate_foreground"]
+__all__ = ["LUMA", "Colour", "background_colours", "clean_mask", "colour_in_channels", "estimate_foreground"]
 
 Colour = tuple[np.ndarray, float]
 """A background colour ``(C,)`` float32 and its tolerance (Euclidean over the channels)."""
@@ -33,6 +33,21 @@ _MIN_TOLERANCE = 0.02
 # The border share that a further background colour must explain; the rest is taken for
 # object pixels at the border.
 _MIN_COLOUR_SHARE = 0.05
+
+
+# ITU-R BT.709 luma, the weights of skimage.color.rgb2gray (as the images' conversion).
+LUMA = np.array([0.2125, 0.7154, 0.0721], dtype=np.float32)
+
+
+def colour_in_channels(colour: Sequence[float], channels: int) -> tuple[float, ...]:
+    """A background colour (1 or 3 values) for an image of ``channels``: an RGB colour
+    as gray by the BT.709 weights (as an RGB image is converted), a gray one repeated."""
+    values = tuple(float(v) for v in colour)
+    if len(values) == channels or len(values) not in (1, 3) or channels not in (1, 3):
+        return values
+    if channels == 1:
+        return (min(1.0, float(np.dot(LUMA, np.asarray(values, dtype=np.float32)))),)
+    return values * 3
 
 
 def _lower_median(values: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from torch_eigview.io.foreground import estimate_foreground
+from torch_eigview.io.foreground import LUMA, colour_in_channels, estimate_foreground
 
 __all__ = ["BACKGROUNDS", "RESIZE_RULE", "Preprocessing", "prepare_array"]
 
@@ -34,9 +34,6 @@ BACKGROUNDS = ("keep", "auto", "colour")
 else the foreground estimated from the colours of the image border; the background is then
 set to 0. ``"colour"``: the same with the recorded background colour in place of the
 border's colours."""
-
-# ITU-R BT.709 luma, the weights of skimage.color.rgb2gray (as ViewDataset's).
-_LUMA = np.array([0.2125, 0.7154, 0.0721], dtype=np.float32)
 
 
 @dataclass(frozen=True)
@@ -106,16 +103,6 @@ class Preprocessing:
                 raise ValueError(f"tolerance must be a positive number, got {self.tolerance!r}")
 
     @property
-    def background_colour(self) -> tuple[float, ...] | None:
-        """The background colour in the model's ``channels``: gray from RGB by the BT.709
-        weights (as the images are), gray repeated for RGB; None without one."""
-        if self.colour is None or len(self.colour) == self.channels:
-            return self.colour
-        if self.channels == 1:
-            return (min(1.0, float(np.dot(_LUMA, np.asarray(self.colour, dtype=np.float32)))),)
-        return self.colour * 3
-
-    @property
     def image_shape(self) -> tuple[int, int, int]:
         """``(C, H, W)`` of the model's input."""
         return (self.channels, *self.size)
@@ -179,14 +166,30 @@ def _resize_plane(plane: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return np.asarray(image.resize((size[1], size[0]), Image.Resampling.BILINEAR), dtype=np.float32)
 
 
+def _convert(work: np.ndarray, channels: int) -> np.ndarray:
+    if channels == 3 and work.shape[0] == 1:
+        return np.repeat(work, 3, axis=0)
+    if channels == 1 and work.shape[0] == 3:
+        return np.clip(np.tensordot(LUMA, work, axes=1)[None], 0.0, 1.0)
+    return work
+
+
+def _resize(work: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    if tuple(work.shape[1:]) == size:
+        return work
+    return np.clip(np.stack([_resize_plane(p, size) for p in work]), 0.0, 1.0).astype(np.float32)
+
+
 def prepare_array(image: np.ndarray, prep: Preprocessing, mask: np.ndarray | None = None) -> np.ndarray:
     """An image ``(C, H, W)`` float in ``[0, 1]`` (alpha dropped) as the model's input, without torch.
 
-    Converts the channels, then resizes each plane with Pillow's antialiased bilinear
-    filter (float32), clamped to ``[0, 1]`` as :class:`~torch_eigview.datasets.image_views.ViewDataset`
-    does. Unless ``prep.background`` is ``"keep"``, the background is then set to 0: the
-    pixels outside ``mask`` (resized to the fraction of object under each pixel,
-    thresholded at one half), else outside the estimated foreground.
+    With ``prep.background`` ``"keep"``: converts the channels, then resizes each plane
+    with Pillow's antialiased bilinear filter (float32), clamped to ``[0, 1]`` as
+    :class:`~torch_eigview.datasets.image_views.ViewDataset` does. Otherwise, as
+    ``ViewDataset`` with a background model: resizes, sets the background to 0 (outside
+    ``mask``, resized to the fraction of object under each pixel and thresholded at one
+    half, else outside the foreground estimated in the image's own channels), then
+    converts the channels.
 
     Args:
         image: ``(C, H, W)`` with C 1 or 3.
@@ -206,19 +209,14 @@ def prepare_array(image: np.ndarray, prep: Preprocessing, mask: np.ndarray | Non
     if mask is not None and mask.shape != image.shape[1:]:
         raise ValueError(f"mask must have the image's size (H, W)={image.shape[1:]}, got {mask.shape}")
     work = image.astype(np.float32, copy=False)
-    if prep.channels == 3 and work.shape[0] == 1:
-        work = np.repeat(work, 3, axis=0)
-    elif prep.channels == 1 and work.shape[0] == 3:
-        work = np.clip(np.tensordot(_LUMA, work, axes=1)[None], 0.0, 1.0)
-    resized = tuple(work.shape[1:]) != prep.size
-    if resized:
-        work = np.clip(np.stack([_resize_plane(p, prep.size) for p in work]), 0.0, 1.0).astype(np.float32)
     if prep.background == "keep":
-        return np.ascontiguousarray(work)
+        return np.ascontiguousarray(_resize(_convert(work, prep.channels), prep.size))
+    work = _resize(work, prep.size)
     if mask is None:
-        fg = estimate_foreground(work, prep.background_colour, prep.tolerance)
+        colour = None if prep.colour is None else colour_in_channels(prep.colour, work.shape[0])
+        fg = estimate_foreground(work, colour, prep.tolerance)
     else:
-        fg = _resize_plane(mask.astype(np.float32), prep.size) >= 0.5 if resized else mask.astype(bool)
+        fg = mask if mask.shape == prep.size else _resize_plane(mask.astype(np.float32), prep.size) >= 0.5
         if not fg.any():
             raise ValueError("the mask is all background (no object pixel): a view must show its object")
-    return np.where(fg[None], work, np.float32(0.0)).astype(np.float32)
+    return np.ascontiguousarray(_convert(np.where(fg[None], work, np.float32(0.0)), prep.channels))
