@@ -74,3 +74,13 @@ def test_warp_augmentation(coil_root: Path) -> None:
     result = load("warp_augmentation").main(["--root", str(coil_root), "--quick"])
     assert result["identity_err"] < 1e-4
     assert result["worst_gap"] < 0.05
+
+
+@pytest.mark.slow
+def test_own_photos_small_case() -> None:
+    """Every kind of file (8-bit, 16-bit, RGBA, masks given or estimated) through fit and evaluate."""
+    rows = load("own_photos").main(["--objects", "head", "cylinder", "--test", "-10", "20", "--step", "5"])
+    assert [r["kind"] for r in rows] == ["black", "masks", "estimated", "16-bit", "rgba"]
+    black = rows[0]["accuracy"]
+    assert all(r["n_test"] == 14 and abs(r["accuracy"] - black) <= 100 / 14 for r in rows)  # within one view
+    assert black >= 90.0
