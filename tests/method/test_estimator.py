@@ -260,13 +260,15 @@ def test_masks_go_to_synthesis(seeds: torch.Tensor) -> None:
     assert not torch.allclose(plain.recognizer_.codes, est.recognizer_.codes, atol=1e-3)
     per_object = [masks[0], None, masks[2]]  # a sequence, one entry without
     FewViewEigenspace(8, synth=(-10.0, 10.0, 5.0), options=options).fit(seeds, [0.0, 10.0], masks=per_object)
-    with pytest.raises(ValueError, match=r"masks\[1\] must have shape \(V, H, W\) = \(2, 32, 32\)"):
+    with pytest.raises(
+        ValueError, match=r"masks\[1\] \(of seeds\[1\]\): masks must have shape \(V, H, W\) = \(2, 32, 32\)"
+    ):
         FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[masks[0], masks[1, :, :16], None])
     empty = masks.clone()
     empty[2, 1] = False
     with pytest.raises(ValueError, match=r"masks\[2\]\[1\] is all background"):
         FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=empty)
-    with pytest.raises(TypeError, match=r"masks\[0\] must be a bool tensor"):
+    with pytest.raises(TypeError, match=r"masks\[0\] \(of seeds\[0\]\): masks must be None or a bool tensor"):
         FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[masks[0].float(), None, None])
     with pytest.raises(ValueError, match=r"masks must hold one entry per object \(3\), got 2"):
         FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[None, None])

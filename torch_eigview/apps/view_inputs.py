@@ -12,6 +12,7 @@ import argparse
 import math
 from typing import TYPE_CHECKING, Any
 
+from torch_eigview.apps.cli_args import finite_arg
 from torch_eigview.io.preprocessing import Preprocessing
 
 if TYPE_CHECKING:
@@ -66,11 +67,8 @@ def background_arg(text: str) -> str | tuple[float, ...]:
 
 
 def _tolerance_arg(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and 0.0 < value <= 255.0 * math.sqrt(3.0)):
+    value = finite_arg("--tolerance")(text)
+    if not 0.0 < value <= 255.0 * math.sqrt(3.0):
         raise argparse.ArgumentTypeError(f"--tolerance {text!r} must be a number in (0, 441.7] (0-255 scale)")
     return value
 

@@ -18,6 +18,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
+from torch_eigview.warp.normalize import seed_foreground
 
 __all__ = [
     "ALL_COMPONENTS",
@@ -139,13 +140,11 @@ def check_seed_masks(masks: object, objects: list[torch.Tensor]) -> list[torch.T
         if m is None:
             out.append(None)
             continue
-        if not isinstance(m, torch.Tensor) or m.dtype != torch.bool:
-            raise TypeError(f"masks[{i}] must be a bool tensor (True on the object) or None, got {m!r:.80}")
-        want = (views.shape[0], *views.shape[2:])
-        if tuple(m.shape) != want:
-            raise ValueError(
-                f"masks[{i}] must have shape (V, H, W) = {want} like seeds[{i}], got {tuple(m.shape)}"
-            )
+        try:
+            seed_foreground(views, m, 0.0)  # a (V, H, W) bool tensor
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"masks[{i}] (of seeds[{i}]): {exc}") from None
+        assert isinstance(m, torch.Tensor)
         empty = (~m.flatten(1).any(dim=1)).nonzero().flatten().tolist()
         if empty:
             raise ValueError(
