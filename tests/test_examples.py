@@ -91,3 +91,13 @@ def test_reject_unknown(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert all(a["known_rejected"] >= b["known_rejected"] for a, b in itertools.pairwise(roc))
     assert result["n_known"] == 3 * 19 and result["n_unknown"] == 2 * 19
     assert float(result["unknown_rejected"]) > float(result["known_rejected"])  # type: ignore[arg-type]
+
+
+@pytest.mark.slow
+def test_own_photos_small_case() -> None:
+    """Every kind of file (8-bit, 16-bit, RGBA, masks given or estimated) through fit and evaluate."""
+    rows = load("own_photos").main(["--objects", "head", "cylinder", "--test", "-10", "20", "--step", "5"])
+    assert [r["kind"] for r in rows] == ["black", "masks", "estimated", "16-bit", "rgba"]
+    black = rows[0]["accuracy"]
+    assert all(r["n_test"] == 14 and abs(r["accuracy"] - black) <= 100 / 14 for r in rows)  # within one view
+    assert black >= 90.0

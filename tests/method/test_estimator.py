@@ -244,3 +244,31 @@ def test_fit_blocks_rejects(gallery: tuple[torch.Tensor, torch.Tensor, torch.Ten
         FewViewEigenspace(4).fit_blocks([(views, torch.zeros(len(views)))])
     with pytest.raises(ValueError, match=r"blocks\[0\] views must have shape"):
         FewViewEigenspace(4).fit_blocks([views.flatten(1)])
+
+
+def test_masks_go_to_synthesis(seeds: torch.Tensor) -> None:
+    """Seed masks replace the brightness threshold: the gallery is synthesize_views(masks=)'s."""
+    from torch_eigview.synthesis import synthesize_views
+
+    masks = seeds[:, :, 0] > 0.3  # (O, V, H, W): a mask that the threshold would not give
+    options = SynthesisOptions(silhouette=True, elevation=0.0)
+    est = FewViewEigenspace(8, synth=(-10.0, 10.0, 5.0), options=options).fit(seeds, [0.0, 10.0], masks=masks)
+    want = synthesize_views(seeds[1], 10.0, [-10.0, -5.0, 0.0, 5.0, 10.0], options, masks=masks[1])
+    plain = FewViewEigenspace(8, synth=(-10.0, 10.0, 5.0), options=options).fit(seeds, [0.0, 10.0])
+    codes = est.transform(want.views)
+    assert torch.allclose(codes, est.recognizer_.codes[5:10], atol=1e-5)
+    assert not torch.allclose(plain.recognizer_.codes, est.recognizer_.codes, atol=1e-3)
+    per_object = [masks[0], None, masks[2]]  # a sequence, one entry without
+    FewViewEigenspace(8, synth=(-10.0, 10.0, 5.0), options=options).fit(seeds, [0.0, 10.0], masks=per_object)
+    with pytest.raises(
+        ValueError, match=r"masks\[1\] \(of seeds\[1\]\): masks must have shape \(V, H, W\) = \(2, 32, 32\)"
+    ):
+        FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[masks[0], masks[1, :, :16], None])
+    empty = masks.clone()
+    empty[2, 1] = False
+    with pytest.raises(ValueError, match=r"masks\[2\]\[1\] is all background"):
+        FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=empty)
+    with pytest.raises(TypeError, match=r"masks\[0\] \(of seeds\[0\]\): masks must be None or a bool tensor"):
+        FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[masks[0].float(), None, None])
+    with pytest.raises(ValueError, match=r"masks must hold one entry per object \(3\), got 2"):
+        FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[None, None])

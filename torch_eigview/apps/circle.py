@@ -122,7 +122,10 @@ def circle_layout(
 
 
 def synthesize_circle(
-    seeds: torch.Tensor, step: float, options: SynthesisOptions | None = None
+    seeds: torch.Tensor,
+    step: float,
+    options: SynthesisOptions | None = None,
+    masks: torch.Tensor | None = None,
 ) -> SynthesizedViews:
     """One object's views all round from its M evenly spaced seed views.
 
@@ -132,6 +135,7 @@ def synthesize_circle(
         seeds: (M, C, H, W) seed views at 0, α, …, (M − 1)·α from the first, M >= 3.
         step: angle between synthesized views in degrees.
         options: the synthesis options.
+        masks: optional (M, H, W) bool seed masks, in place of the brightness threshold.
 
     Returns:
         :class:`~torch_eigview.synthesis.SynthesizedViews`: (M·T, C, H, W) views, their
@@ -143,7 +147,10 @@ def synthesize_circle(
     thetas = [t for t in angle_range(0.0, alpha, step, "circle step") if t < alpha - _TOL]
     views, elevations, seconds = [], [], {"correspondence": 0.0, "synthesis": 0.0}
     for k in range(m):
-        out = synthesize_views(seeds[[k, (k + 1) % m]], alpha, thetas, options)
+        pair = [k, (k + 1) % m]
+        out = synthesize_views(
+            seeds[pair], alpha, thetas, options, masks=None if masks is None else masks[pair]
+        )
         views.append(out.views)
         elevations += out.elevations
         for key, value in out.seconds.items():

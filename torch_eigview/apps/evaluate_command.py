@@ -5,7 +5,8 @@ preprocessing (:class:`~torch_eigview.io.preprocessing.Preprocessing`) and score
 ``eigview coil`` scores its test views (:func:`~torch_eigview.apps.protocol.score`):
 accuracy, per-object accuracy, and the pose error (wrapped to (-180, 180]) of the correctly
 recognized views, mean and median. A bad row (a missing or corrupt file, a mask of
-another size, a non-numeric angle, a duplicate view) is reported with its manifest line
+another size or all background, a background colour that leaves no object, a non-numeric
+angle, a duplicate view) is reported with its manifest line
 and left out, and the others go on; the exit status is then 1. Views of objects the model
 does not know are counted apart (``unknown_objects``): they are what rejection is scored
 on, whose figures go in ``rejection`` (None while the recognizer has none).
@@ -25,6 +26,7 @@ from torch_eigview.apps.cli_args import add_quiet, add_threads
 from torch_eigview.apps.predict import escape
 from torch_eigview.apps.view_inputs import (
     add_manifest_arguments,
+    background_model,
     label_table,
     load_manifest,
     load_model,
@@ -121,15 +123,21 @@ def _tests(
     from torch_eigview.apps.protocol import wrap_degrees
     from torch_eigview.datasets.image_views import read_view
 
+    background = background_model(prep)
     for obj, entries in groups.items():
         images, poses = [], []
         for e in entries:
             try:
-                images.append(
-                    read_view(
-                        e.path, e.mask, size=prep.size, channels=prep.channels, dtype=dtype, source=e.source
-                    )[0]
+                image, _ = read_view(
+                    e.path,
+                    e.mask,
+                    size=prep.size,
+                    channels=prep.channels,
+                    dtype=dtype,
+                    source=e.source,
+                    background=background,
                 )
+                images.append(image)
                 poses.append(e.azimuth)
             except ValueError as exc:
                 _skip(skipped, str(exc))

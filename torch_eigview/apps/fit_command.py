@@ -27,12 +27,20 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
 )
 from torch_eigview.apps.coil_command import add_synthesis_arguments, synthesis_options
-from torch_eigview.apps.view_inputs import add_manifest_arguments, load_manifest, manifest_inputs
+from torch_eigview.apps.view_inputs import (
+    add_background_arguments,
+    add_manifest_arguments,
+    background_fields,
+    background_model,
+    load_manifest,
+    manifest_inputs,
+)
 from torch_eigview.files import check_outputs
 
 if TYPE_CHECKING:
     import torch
 
+    from torch_eigview.datasets.background import BackgroundModel
     from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
     from torch_eigview.synthesis import SynthesisOptions
 
@@ -81,6 +89,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=None,
         help="1: gray, 3: RGB (default: the first view's)",
     )
+    add_background_arguments(fit)
     fit.add_argument(
         "-k", "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
     )
@@ -183,36 +192,48 @@ def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[
 
 
 def _gallery(
-    seeds: torch.Tensor, plan: SeedPlan, options: SynthesisOptions, obj: str
+    seeds: tuple[torch.Tensor, torch.Tensor | None], plan: SeedPlan, options: SynthesisOptions, obj: str
 ) -> tuple[torch.Tensor, list[float]]:
-    """One object's synthesized gallery views and their poses (degrees, unwrapped)."""
+    """One object's synthesized gallery views and their poses (degrees, unwrapped), from its
+    seed views (V, C, H, W) and their masks (V, H, W) or None (the brightness threshold)."""
     from torch_eigview.apps.circle import synthesize_circle
     from torch_eigview.synthesis import synthesize_views
 
+    views, masks = seeds
     try:
         if plan.thetas is None:
-            out = synthesize_circle(seeds, plan.step, options)
+            out = synthesize_circle(views, plan.step, options, masks=masks)
         else:
-            out = synthesize_views(seeds, plan.alpha, plan.thetas, options)
+            out = synthesize_views(views, plan.alpha, plan.thetas, options, masks=masks)
     except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
         raise ValueError(f"object {obj!r}: synthesis failed: {exc}") from exc
     return out.views, [plan.first + t for t in out.thetas.tolist()]
 
 
-def _read_seeds(entries: list[ViewEntry], size: tuple[int, int] | None, channels: int | None) -> torch.Tensor:
-    """The seed views (V, C, H, W); without ``size`` they must share the first one's size."""
+def _read_seeds(
+    entries: list[ViewEntry],
+    size: tuple[int, int] | None,
+    channels: int | None,
+    background: BackgroundModel | None = None,
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """The seed views (V, C, H, W) and, with ``background``, their masks (V, H, W) (else
+    None); without ``size`` they must share the first one's size."""
     import torch
 
     from torch_eigview.datasets.image_views import read_view
 
-    images = [read_view(e.path, e.mask, size=size, channels=channels, source=e.source)[0] for e in entries]
-    for e, image in zip(entries, images, strict=True):
-        if image.shape != images[0].shape:
+    read = [
+        read_view(e.path, e.mask, size=size, channels=channels, source=e.source, background=background)
+        for e in entries
+    ]
+    for e, (image, _) in zip(entries, read, strict=True):
+        if image.shape != read[0][0].shape:
             raise ValueError(
                 f"{e.source}: image {e.path} is (C, H, W)={tuple(image.shape)}, the first seed view "
-                f"{entries[0].path} {tuple(images[0].shape)}; give --size H W (and --channels) to resize them"
+                f"{entries[0].path} {tuple(read[0][0].shape)}; give --size H W (and --channels) to resize them"
             )
-    return torch.stack(images)
+    views = torch.stack([image for image, _ in read])
+    return views, None if background is None else torch.stack([mask[0] for _, mask in read])
 
 
 def run_fit(args: argparse.Namespace) -> int:
@@ -222,27 +243,30 @@ def run_fit(args: argparse.Namespace) -> int:
     from torch_eigview.io.preprocessing import Preprocessing
 
     check_outputs([("--out", args.out)], inputs=manifest_inputs(args))
+    fields = background_fields(args)
     plan = seed_plan(list(args.seeds), args.center, tuple(args.synth))
     manifest = load_manifest(args)
     objects = manifest.objects
     picked = {obj: pick_seeds(manifest, obj, plan.azimuths) for obj in objects}  # all checked first
     size = None if args.size is None else (args.size[0], args.size[1])
-    first = _read_seeds(picked[objects[0]], size, args.channels)
+    first, _ = _read_seeds(picked[objects[0]][:1], size, args.channels)  # the size and channels
     size, channels = size or (first.shape[2], first.shape[3]), args.channels or first.shape[1]
+    unit_norm = not args.no_unit_norm
+    prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm, **fields)
+    background = background_model(prep)
     options = synthesis_options(args)
 
     def blocks() -> Iterator[tuple[torch.Tensor, int, list[float]]]:
         loop = progress_bar(args.quiet, "fit objects", "obj")
         for label, obj in enumerate(loop(objects) if loop else objects):
-            views, poses = _gallery(_read_seeds(picked[obj], size, channels), plan, options, obj)
+            seeds = _read_seeds(picked[obj], size, channels, background)
+            views, poses = _gallery(seeds, plan, options, obj)
             yield views, label, poses
 
     x, labels, poses = stack_gallery(blocks())
-    unit_norm = not args.no_unit_norm
     recognizer = build_recognizer(
         x, labels, wrap_degrees(poses), args.components, unit_norm=unit_norm, label_names=objects
     )
-    prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm)
     meta = {
         "command": "fit",
         "preprocessing": prep.to_json(),

@@ -12,7 +12,8 @@ graph is checked before onnxruntime runs it (:mod:`torch_eigview.io.onnx_check`)
 A model exported from an ``eigview fit`` model carries its preprocessing in its metadata
 (:class:`~torch_eigview.io.preprocessing.Preprocessing`): each image is then converted to
 the model's channels and resized to its size (:func:`~torch_eigview.io.preprocessing.prepare_array`)
-instead of having to match them. ``--model model.pt`` runs the model file itself with torch
+instead of having to match them, and its background set to 0 unless the model keeps it
+(the alpha channel as the mask, else the foreground estimated as ``eigview evaluate`` does). ``--model model.pt`` runs the model file itself with torch
 (:class:`~torch_eigview.apps.predict_model.ModelRecognizer`), with the same preprocessing
 as ``eigview evaluate``.
 
@@ -121,12 +122,16 @@ class OnnxRecognizer:
             ValueError: not a regular file, unreadable, or (without preprocessing) a shape
                 other than the model's (C, H, W).
         """
-        arr = read_image(path)
-        if self.info.preprocessing is not None:
+        prep = self.info.preprocessing
+        if prep is not None:
+            arr = read_image(path, keep_alpha=prep.background != "keep")
+            mask = arr[-1] > 0 if arr.shape[0] in (2, 4) else None  # the alpha channel decides
+            colour = arr[:-1] if mask is not None else arr
             try:
-                return prepare_array(to_unit_float(arr, np.float32), self.info.preprocessing)
+                return prepare_array(to_unit_float(colour, np.float32), prep, mask)
             except ValueError as exc:
                 raise ValueError(f"image {path}: {exc}") from None
+        arr = read_image(path)
         if tuple(arr.shape) != self.info.image_shape:
             raise ValueError(
                 f"image {path} has shape (C, H, W)={tuple(arr.shape)}, but the model expects "

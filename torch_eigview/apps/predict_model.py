@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from torch_eigview.apps.predict import Prediction
-from torch_eigview.apps.view_inputs import label_table, load_model
+from torch_eigview.apps.view_inputs import background_model, label_table, load_model
 from torch_eigview.datasets.image_views import read_view
 from torch_eigview.io.images import check_regular_file
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
@@ -40,6 +40,7 @@ class ModelRecognizer:
         self.path = os.fspath(path)
         check_regular_file(self.path, "model")
         self.recognizer, _, self.prep = load_model(self.path)
+        self.background = background_model(self.prep)
         self._names = {label: name for name, label in label_table(self.recognizer).items()}
         self.info = OnnxModelInfo(
             kind="recognizer",
@@ -55,10 +56,20 @@ class ModelRecognizer:
     def load(self, path: str) -> np.ndarray:
         """One image as the model's input ``(C, H, W)`` float32, preprocessed as recorded.
 
+        The background (unless the model keeps it) is found from the image's alpha channel,
+        else estimated, as ``eigview evaluate`` does for a view without a mask.
+
         Raises:
-            ValueError: not a regular file, or unreadable; the message names it.
+            ValueError: not a regular file, unreadable, an all-background alpha, or a
+                background that leaves no object; the message names it.
         """
-        image, _ = read_view(path, size=self.prep.size, channels=self.prep.channels, dtype=torch.float32)
+        image, _ = read_view(
+            path,
+            size=self.prep.size,
+            channels=self.prep.channels,
+            dtype=torch.float32,
+            background=self.background,
+        )
         return image.numpy()
 
     def predict_rows(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction | str]:

@@ -9,16 +9,23 @@ a model file is :func:`~torch_eigview.io.checkpoint.save_recognizer`'s, with the
 from __future__ import annotations
 
 import argparse
+import math
 from typing import TYPE_CHECKING, Any
 
+from torch_eigview.apps.cli_args import finite_arg
 from torch_eigview.io.preprocessing import Preprocessing
 
 if TYPE_CHECKING:
+    from torch_eigview.datasets.background import BackgroundModel
     from torch_eigview.datasets.manifest import ViewManifest
     from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
 __all__ = [
+    "add_background_arguments",
     "add_manifest_arguments",
+    "background_arg",
+    "background_fields",
+    "background_model",
     "label_table",
     "load_manifest",
     "load_model",
@@ -39,6 +46,78 @@ def add_manifest_arguments(parser: argparse.ArgumentParser) -> None:
         help='file names under --root, e.g. "{object}/{object}-{elevation}-{azimuth}.png"',
     )
     parser.add_argument("--root", metavar="DIR", help="the folder --pattern searches")
+
+
+def background_arg(text: str) -> str | tuple[float, ...]:
+    """``--background``: ``keep``, ``auto``, or a colour ``R,G,B`` (or one gray value) in 0-255,
+    returned in [0, 1]."""
+    if text in ("keep", "auto"):
+        return text
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 3) or not all(math.isfinite(v) and 0.0 <= v <= 255.0 for v in values):
+        raise argparse.ArgumentTypeError(
+            f"--background {text!r} must be keep, auto, or a colour R,G,B (or one gray value) of numbers "
+            "in 0-255, e.g. 26,77,179"
+        )
+    return tuple(v / 255.0 for v in values)
+
+
+def _tolerance_arg(text: str) -> float:
+    value = finite_arg("--tolerance")(text)
+    if not 0.0 < value <= 255.0 * math.sqrt(3.0):
+        raise argparse.ArgumentTypeError(f"--tolerance {text!r} must be a number in (0, 441.7] (0-255 scale)")
+    return value
+
+
+def add_background_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--background keep|auto|R,G,B`` and ``--tolerance T`` (both on the 0-255 scale)."""
+    parser.add_argument(
+        "--background",
+        type=background_arg,
+        default="keep",
+        metavar="keep|auto|R,G,B",
+        help="keep: pixels as read (black-background data); auto: each view's mask (manifest mask "
+        "column, alpha channel) where given, else the foreground estimated from the border's colours; "
+        "R,G,B: that background colour, 0-255. Except with keep the background is set to 0",
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=_tolerance_arg,
+        default=None,
+        metavar="T",
+        help="with auto or R,G,B: the largest colour distance (Euclidean, 0-255 scale) that is still "
+        "background (default: from the spread of the border's colours)",
+    )
+
+
+def background_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`~torch_eigview.io.preprocessing.Preprocessing` fields of ``--background``
+    and ``--tolerance``.
+
+    Raises:
+        ValueError: ``--tolerance`` with ``--background keep``.
+    """
+    choice = args.background
+    if args.tolerance is not None and choice == "keep":
+        raise ValueError("--tolerance goes with --background auto or R,G,B, not with keep")
+    tolerance = None if args.tolerance is None else args.tolerance / 255.0
+    if isinstance(choice, tuple):
+        return {"background": "colour", "colour": choice, "tolerance": tolerance}
+    return {"background": choice, "colour": None, "tolerance": tolerance}
+
+
+def background_model(prep: Preprocessing) -> BackgroundModel | None:
+    """The :class:`~torch_eigview.datasets.background.BackgroundModel` a preprocessing
+    record applies (background set to 0), or None for ``"keep"``."""
+    from torch_eigview.datasets.background import BackgroundModel
+
+    if prep.background == "keep":
+        return None
+    return BackgroundModel(background=prep.colour, tolerance=prep.tolerance)
 
 
 def manifest_inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:

@@ -24,19 +24,12 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
 import torch
-from scipy import ndimage
 
 from torch_eigview.check import check_finite, check_float_tensor, check_int, check_number, check_positive
+from torch_eigview.io.foreground import estimate_foreground
 
 __all__ = ["BackgroundModel", "border_pixels", "check_masks", "set_background"]
-
-# Below this a tolerance would split 8-bit quantization noise (2/255 in three channels).
-_MIN_TOLERANCE = 0.02
-# The border share that a further background colour must explain; the rest is taken for
-# object pixels at the border.
-_MIN_COLOUR_SHARE = 0.05
 
 
 def check_masks(masks: object, images: torch.Tensor, name: str = "masks") -> torch.Tensor:
@@ -103,50 +96,6 @@ def border_pixels(images: torch.Tensor, width: int) -> torch.Tensor:
     return images.permute(0, 2, 3, 1)[:, ring].reshape(images.shape[0], -1, c)
 
 
-def _tolerance(distances: torch.Tensor) -> float:
-    """The tolerance of one background colour from its border pixels' distances to it.
-
-    Twice their 95th percentile: the backdrop inside the frame reaches a little beyond
-    what its border sample shows, and an object pixel is nowhere near this close to a
-    backdrop colour unless it has that colour (then the hole filling takes it back).
-    """
-    return max(_MIN_TOLERANCE, 2.0 * float(distances.double().quantile(0.95)))
-
-
-def _border_colours(pixels: torch.Tensor, max_colours: int) -> list[tuple[torch.Tensor, float]]:
-    """Background colours of one image and their tolerances from its (M, C) border pixels."""
-    colours: list[tuple[torch.Tensor, float]] = []
-    left = pixels
-    while len(colours) < max_colours and left.shape[0] >= _MIN_COLOUR_SHARE * pixels.shape[0]:
-        colour = left.median(dim=0).values
-        dist = (left - colour).norm(dim=1)
-        # Its own pixels: within three median distances of it (the median colour is the
-        # majority's, so the median distance is the majority's spread).
-        own = dist <= max(3.0 * float(dist.median()), _MIN_TOLERANCE)
-        tol = _tolerance(dist[own])
-        colours.append((colour, tol))
-        left = left[dist > tol]
-    return colours
-
-
-def _clean(mask: np.ndarray, min_area: int) -> np.ndarray:
-    """Drops foreground components and fills background holes smaller than ``min_area``."""
-    labels, n = ndimage.label(mask)
-    if n:
-        sizes = np.bincount(labels.ravel(), minlength=n + 1)
-        keep = sizes >= min_area
-        keep[0] = False
-        mask = keep[labels]
-    holes = ~mask & ndimage.binary_fill_holes(mask)
-    labels, n = ndimage.label(holes)
-    if n:
-        sizes = np.bincount(labels.ravel(), minlength=n + 1)
-        fill = sizes < min_area
-        fill[0] = False
-        mask = mask | fill[labels]
-    return mask
-
-
 @dataclass(frozen=True)
 class BackgroundModel:
     """How the foreground of a view is found and what its background becomes.
@@ -196,34 +145,6 @@ class BackgroundModel:
         if self.fill is not None and not math.isfinite(check_number(self.fill, "fill")):
             raise ValueError(f"fill={self.fill!r} must be a finite intensity or None")
 
-    def _colours(self, images: torch.Tensor) -> list[list[tuple[torch.Tensor, float]]]:
-        """Per image, its background colours with their tolerances."""
-        b, c, h, w = images.shape
-        if 2 * self.border >= min(h, w):
-            raise ValueError(
-                f"border={self.border} must be less than half the image side min(H, W)={min(h, w)}"
-            )
-        pixels = border_pixels(images, self.border)
-        if self.background is None:
-            found = [_border_colours(p, self.max_colours) for p in pixels]
-            if self.tolerance is None:
-                return found
-            return [[(col, float(self.tolerance)) for col, _ in cols] for cols in found]
-        if len(self.background) != c:
-            raise ValueError(
-                f"background={self.background!r} must hold C={c} values, one per channel of images"
-            )
-        colour = images.new_tensor(self.background)
-        if self.tolerance is not None:
-            return [[(colour, float(self.tolerance))]] * b
-        # The border pixels near the given colour: object pixels at the border do not widen it.
-        out = []
-        for p in pixels:
-            dist = (p - colour).norm(dim=1)
-            own = dist <= max(3.0 * float(dist.median()), _MIN_TOLERANCE)
-            out.append([(colour, _tolerance(dist[own]))])
-        return out
-
     def masks(self, images: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
         """The foreground masks of ``images``: ``masks`` when given (checked), else estimated.
 
@@ -241,23 +162,27 @@ class BackgroundModel:
         images = _check_images(images)
         if masks is not None:
             return check_masks(masks, images)
-        b, _, h, w = images.shape
-        min_area = math.ceil(self.min_fraction * h * w)
+        b, c, h, w = images.shape
+        if self.background is not None and len(self.background) != c:
+            raise ValueError(
+                f"background={self.background!r} must hold C={c} values, one per channel of images"
+            )
+        if 2 * self.border >= min(h, w):
+            raise ValueError(
+                f"border={self.border} must be less than half the image side min(H, W)={min(h, w)}"
+            )
         out = torch.zeros(b, 1, h, w, dtype=torch.bool)
-        for i, (image, colours) in enumerate(zip(images, self._colours(images), strict=True)):
-            near = torch.zeros(h, w, dtype=torch.bool, device=images.device)
-            for colour, tol in colours:
-                near |= (image - colour[:, None, None]).norm(dim=0) <= tol
-            mask = _clean((~near).cpu().numpy(), min_area)
-            if not mask.any():
-                described = ", ".join(
-                    f"({', '.join(f'{v:.3g}' for v in col.tolist())}) ± {tol:.3g}" for col, tol in colours
-                )
-                source = "given" if self.background is not None else "estimated from the border"
-                raise ValueError(
-                    f"background={described} ({source}) leaves no object in images[{i}]: every pixel "
-                    "is within the tolerance of a background colour (give background= or a smaller tolerance=)"
-                )
+        # One numpy rule for this and the torch-free eigview predict (io.foreground).
+        for i, image in enumerate(images.detach().float().cpu().numpy()):
+            mask = estimate_foreground(
+                image,
+                self.background,
+                self.tolerance,
+                border=self.border,
+                max_colours=self.max_colours,
+                min_fraction=self.min_fraction,
+                where=f"images[{i}]",
+            )
             out[i, 0] = torch.from_numpy(mask)
         return out.to(images.device)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from torch.utils.data import Dataset
 from torch_eigview.check import check_int
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.manifest import ViewManifest
+from torch_eigview.io.foreground import colour_in_channels
 from torch_eigview.io.images import read_image, to_unit_float
 
 __all__ = ["ViewDataset", "read_view"]
@@ -77,7 +79,9 @@ class ViewDataset(Dataset[dict[str, Any]]):
             :class:`~torch_eigview.datasets.background.BackgroundModel`: then a view
             without a mask (image or alpha) gets the model's estimated mask, and every
             image's background is set to the model's ``fill`` (kept when None), after
-            resizing.
+            resizing and before the channels are converted (the mask is found in the
+            file's own colours; a given background colour of 1 or 3 values is converted
+            to the file's channels).
 
     Raises:
         TypeError: A wrong type of argument.
@@ -191,20 +195,30 @@ def read_view(
         raise ValueError(f"{source}: {exc}") from None
     work = np.float64 if dtype == torch.float64 else np.float32
     image = torch.from_numpy(to_unit_float(colour, work)).to(dtype)
-    if channels == 3 and image.shape[0] == 1:
-        image = image.expand(3, -1, -1).clone()
-    elif channels == 1 and image.shape[0] == 3:
-        weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
-        image = (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
     out = torch.from_numpy(np.ascontiguousarray(found))
+    if background is None:
+        image = _convert(image, channels)
+        return _resize(image, out, hw) if hw is not None else (image, out)
+    # The foreground is found in the file's own channels (a colour photograph's backdrop
+    # is told apart by its colour, not only its gray), then the channels are converted.
     if hw is not None:
         image, out = _resize(image, out, hw)
-    if background is None:
-        return image, out
+    if background.background is not None:
+        background = replace(background, background=colour_in_channels(background.background, image.shape[0]))
     given = mask is not None or alpha is not None
     try:
         masked, fg = background.apply(image[None], out[None] if given else None)
     except ValueError as exc:
         where = f"{source}: {path}" if source is not None else str(path)
         raise ValueError(f"{where}: {exc}") from None
-    return masked[0], fg[0]
+    return _convert(masked[0], channels), fg[0]
+
+
+def _convert(image: torch.Tensor, channels: int | None) -> torch.Tensor:
+    """``image`` (C, H, W) with ``channels``: gray repeated, or RGB to gray (BT.709)."""
+    if channels == 3 and image.shape[0] == 1:
+        return image.expand(3, -1, -1).clone()
+    if channels == 1 and image.shape[0] == 3:
+        weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
+        return (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
+    return image

@@ -33,6 +33,7 @@ from torch_eigview.method.inputs import (
     block_source,
     check_angles,
     check_labels,
+    check_seed_masks,
     check_seeds,
     check_synth,
     resolve_components,
@@ -155,7 +156,9 @@ class FewViewEigenspace:
         return rate, score, poses
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, seeds: object, seed_angles: object, labels: object = None) -> FewViewEigenspace:
+    def fit(
+        self, seeds: object, seed_angles: object, labels: object = None, *, masks: object = None
+    ) -> FewViewEigenspace:
         """Synthesizes every object's gallery from its seed views and fits on all of them.
 
         Memory: the gallery views twice (P × N, and their unit-norm copy) plus the P×P
@@ -170,6 +173,12 @@ class FewViewEigenspace:
                 or one sequence per object. With ``synth``, V_o >= 2 and the angles are
                 equally spaced (either sign) or increasing (Sec. 4.1's α_n).
             labels: O int labels, default 0 … O − 1.
+            masks: optional foreground masks of the seed views, True on the object: an
+                (O, V, H, W) bool tensor or a sequence of O (V_o, H, W) ones (an entry
+                may be None). They replace the brightness threshold of synthesis
+                (silhouette-aware sampling, size normalization, the automatic elevation);
+                the seeds' background should already be one constant (e.g.
+                :class:`~torch_eigview.datasets.background.BackgroundModel`'s ``apply``).
 
         Returns:
             self, fitted: ``eigenspace_``, ``projection_``, ``recognizer_``,
@@ -184,6 +193,7 @@ class FewViewEigenspace:
         objects = check_seeds(seeds)
         angles = check_angles(seed_angles, objects)
         names = check_labels(labels, len(objects))
+        seed_masks = check_seed_masks(masks, objects)
         if params.synth is not None:
             warn_unnormalized_seeds(objects, params.options)
         self.elevations_: list[list[float]] = []
@@ -193,7 +203,7 @@ class FewViewEigenspace:
         held_out: list[torch.Tensor] = []
         held_poses = None if reject is None else reject[2]
         for block, label, block_poses in self._galleries(
-            params, objects, angles, names, held_poses, held_out
+            params, objects, angles, names, seed_masks, held_poses, held_out
         ):
             views.append(block)
             label_list += [label] * len(block_poses)
@@ -211,13 +221,14 @@ class FewViewEigenspace:
         objects: list[torch.Tensor],
         angles: list[list[float]],
         labels: list[int],
+        masks: list[torch.Tensor | None],
         held_poses: tuple[float, float, float] | None = None,
         held_out: list[torch.Tensor] | None = None,
     ) -> Iterator[Gallery]:
         """Per object its gallery views, label and poses; appends its elevations to
         ``elevations_``, and to ``held_out`` its views synthesized at ``held_poses`` (start,
         stop, step) that are not gallery poses (in the same call, from the same geometry)."""
-        for views, seed_angles, label in zip(objects, angles, labels, strict=True):
+        for views, seed_angles, label, mask in zip(objects, angles, labels, masks, strict=True):
             if params.synth is None:
                 yield views, label, seed_angles
                 continue
@@ -229,7 +240,7 @@ class FewViewEigenspace:
             alpha: float | list[float] = steps[0] if len(set(steps)) == 1 else steps
             thetas = params.thetas(steps)
             held = [] if held_poses is None else _held_out_thetas(held_poses, thetas)
-            out = synthesize_views(views, alpha, thetas + held, params.options)
+            out = synthesize_views(views, alpha, thetas + held, params.options, masks=mask)
             self.elevations_.append(out.elevations)
             if held_out is not None:
                 held_out.append(out.views[len(thetas) :])

@@ -19,7 +19,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
-from torch_eigview.warp.normalize import foreground_mask
+from torch_eigview.warp.normalize import foreground_mask, seed_foreground
 
 __all__ = [
     "ALL_COMPONENTS",
@@ -28,6 +28,7 @@ __all__ = [
     "block_source",
     "check_angles",
     "check_labels",
+    "check_seed_masks",
     "check_seeds",
     "check_synth",
     "resolve_components",
@@ -120,6 +121,44 @@ def check_seeds(seeds: object) -> list[torch.Tensor]:
                 f"like seeds[0], got shape {tuple(s.shape)} and dtype {s.dtype}"
             )
     return objects
+
+
+def check_seed_masks(masks: object, objects: list[torch.Tensor]) -> list[torch.Tensor | None]:
+    """Per object its (V_o, H, W) bool seed masks or None (the brightness threshold).
+
+    ``masks`` is None, an (O, V, H, W) bool tensor, or a sequence of O entries, each None
+    or a (V_o, H, W) bool tensor; every mask must show its object (a True pixel).
+    """
+    if masks is None:
+        return [None] * len(objects)
+    if isinstance(masks, torch.Tensor):
+        check_ndim(masks, "masks", (4,), "(O, V, H, W)")
+        per_object: list[object] = list(masks.detach().unbind(0))
+    elif isinstance(masks, Sequence) and not isinstance(masks, str):
+        per_object = list(masks)
+    else:
+        raise TypeError(
+            f"masks must be None, an (O, V, H, W) bool tensor or a sequence of (V, H, W) ones, got {type(masks).__name__}"
+        )
+    if len(per_object) != len(objects):
+        raise ValueError(f"masks must hold one entry per object ({len(objects)}), got {len(per_object)}")
+    out: list[torch.Tensor | None] = []
+    for i, (m, views) in enumerate(zip(per_object, objects, strict=True)):
+        if m is None:
+            out.append(None)
+            continue
+        try:
+            seed_foreground(views, m, 0.0)  # a (V, H, W) bool tensor
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"masks[{i}] (of seeds[{i}]): {exc}") from None
+        assert isinstance(m, torch.Tensor)
+        empty = (~m.flatten(1).any(dim=1)).nonzero().flatten().tolist()
+        if empty:
+            raise ValueError(
+                f"masks[{i}][{empty[0]}] is all background (no True pixel): a view must show its object"
+            )
+        out.append(m.detach())
+    return out
 
 
 def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[float]]:
