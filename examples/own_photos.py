@@ -147,9 +147,9 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     parser.add_argument("--step", type=float, default=1.0, help="degrees between test views")
     parser.add_argument(
         "--fit-args",
-        default="--elevation 0 --silhouette --no-extent",
+        default="--elevation 0 --silhouette",
         help="further eigview fit options, the same for every kind: the renders' camera is untilted, and "
-        "their objects do not fill the frame, so the synthesized views are not size-normalized (as COIL's are)",
+        "their objects do not fill the frame, so --extent auto (the default) leaves the synthesized views unnormalized",
     )
     parser.add_argument("--json", help="write the table here")
     args = parser.parse_args(argv)

@@ -233,7 +233,7 @@ def test_silhouette_aware_synthesis_has_no_dark_rim() -> None:
 
 def test_options_defaults() -> None:
     opts = SynthesisOptions()
-    assert (opts.flow, opts.elevation, opts.extent, opts.threshold) == ("tvl1", "auto", True, 1.0)
+    assert (opts.flow, opts.elevation, opts.extent, opts.threshold) == ("tvl1", "auto", "auto", 1.0)
     assert SynthesisOptions(flow="ilk", elevation=12.5).elevation == 12.5
 
 
@@ -324,3 +324,23 @@ def test_auto_elevation_falls_back_to_zero_without_a_fit() -> None:
     assert [g.elevation for g in geometry] == [0.0]
     out = synthesize_views(seeds, 10.0, [5.0], SynthesisOptions(elevation="auto"), geometry)
     assert out.elevations == [0.0] and bool((out.views == 0).all())
+
+
+def test_extent_auto_normalizes_only_seeds_that_fill_the_frame() -> None:
+    """ "auto": a view with a margin round its object is synthesized as it is (extent off), one
+    that fills the frame is size-normalized (extent on)."""
+    gen = torch.Generator().manual_seed(0)
+    small = torch.zeros(2, 1, 24, 24)
+    small[:, :, 6:18, 8:16] = torch.rand(2, 1, 12, 8, generator=gen) * 0.8 + 0.2
+    full = torch.zeros(2, 1, 24, 24)
+    full[:, :, :, 6:18] = torch.rand(2, 1, 24, 12, generator=gen) * 0.8 + 0.2
+
+    def views(seeds: torch.Tensor, extent: bool | str) -> torch.Tensor:
+        opts = SynthesisOptions(elevation=0.0, extent=extent, flow_options={})
+        return synthesize_views(seeds, 10.0, [0.0, 5.0, 10.0], opts).views
+
+    assert torch.equal(views(small, "auto"), views(small, False))
+    assert not torch.equal(views(small, True), views(small, False))
+    assert torch.equal(views(full, "auto"), views(full, True))
+    with pytest.raises(ValueError, match="extent must be True, False or 'auto'"):
+        SynthesisOptions(extent="yes")

@@ -14,12 +14,9 @@ exactly one pair (:func:`pair_of`):
   same image there (its second view: the map at a seed's own angle is the identity and
   needs no correspondence; with a tilted camera up to float rounding in the image's
   first and last rows), so the views are continuous across every seam. The pairs are
-  not blended: that would mix an extrapolation with an interpolation warped
-  differently, and on COIL-20 a cross-fade over α/2 each side of the middle seed
-  changed no recognition.
+  not blended (on COIL-20 a cross-fade across the middle seed changed no recognition).
 
-Each pair keeps its own elevation estimate (``elevation="auto"``), measured from its own
-flow.
+Each pair keeps its own elevation estimate (``elevation="auto"``), from its own flow.
 """
 
 from __future__ import annotations
@@ -46,7 +43,7 @@ from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
 from torch_eigview.warp.base import BLENDS
-from torch_eigview.warp.normalize import foreground_mask, normalize_extent, seed_foreground
+from torch_eigview.warp.normalize import foreground_mask, normalize_extent, resolve_extent, seed_foreground
 from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
@@ -85,10 +82,10 @@ class SynthesisOptions:
             pair whose flow gives no trusted foreground match, or a fit at
             ``MAX_AUTO_ELEVATION`` or beyond (saturated), falls back to 0 with an
             :class:`ElevationFallbackWarning`.
-        extent: size-normalize each synthesized view as the data set's images are
-            (:func:`~torch_eigview.warp.normalize.normalize_extent`; COIL's processed set is).
-        background: intensity below which a pixel is background (for ``extent`` and the
-            elevation fit).
+        extent: size-normalize each synthesized view as the data set's images are (COIL's
+            processed set is): True, False or ``"auto"``
+            (:func:`~torch_eigview.warp.normalize.resolve_extent`).
+        background: intensity below which a pixel is background (``extent``, elevation fit).
         center: column of the rotation axis, default the image's centre column.
         max_stretch: see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`.
         flow_options: keyword arguments for the scikit-image flow function. By default
@@ -107,7 +104,7 @@ class SynthesisOptions:
     flow: str = "tvl1"
     threshold: float = 1.0
     elevation: float | str = "auto"
-    extent: bool = True
+    extent: bool | str = "auto"
     background: float = 0.05
     center: float | None = None
     max_stretch: float = 3.0
@@ -129,6 +126,8 @@ class SynthesisOptions:
                 raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
         elif not abs(check_number(self.elevation, "elevation")) < 90:  # NaN fails too
             raise ValueError(f"elevation={self.elevation!r} must be an angle in degrees in (-90, 90)")
+        if self.extent != "auto" and not isinstance(self.extent, bool):
+            raise ValueError(f"extent must be True, False or 'auto', got {self.extent!r}")
         if not isinstance(self.silhouette, bool):
             raise TypeError(f"silhouette must be a bool, got {type(self.silhouette).__name__}")
         if self.blend not in BLENDS:
@@ -368,6 +367,7 @@ def synthesize_views(
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1
     masks = None if masks is None else seed_foreground(seeds, masks, opts.background)
+    extent = resolve_extent(opts.extent, seed_foreground(seeds, masks, opts.background))
     if geometry is None:
         geometry = pair_geometry(seeds, alpha, opts, masks)
     elif len(geometry) != n_pairs:
@@ -387,7 +387,7 @@ def synthesize_views(
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
         fg = foreground_mask(pair_seeds, opts.background) if masks is None else masks[n : n + 2, None]
         sil = fg if opts.silhouette else None
-        if opts.extent:
+        if extent:
             # The foreground mask rides along as one more channel: one warp for both.
             channel = fg.to(seeds.dtype)[:, :, None]
             warped = warp.apply_maps(maps, torch.cat([pair_seeds, channel], dim=2), sil)[0]

@@ -48,6 +48,11 @@ def test_seed_views_are_known_at_their_own_pose(fitted: FewViewEigenspace) -> No
 
 def test_size_normalizing_unnormalized_seeds_warns() -> None:
     with pytest.warns(UserWarning, match=r"options.extent=True size-normalizes .* fills only"):
+        FewViewEigenspace(4, synth=(0.0, 10.0, 5.0), options=SynthesisOptions(extent=True)).fit(
+            _seeds(), [0.0, 10.0]
+        )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # "auto" (the default) does not normalize them
         FewViewEigenspace(4, synth=(0.0, 10.0, 5.0)).fit(_seeds(), [0.0, 10.0])
     full = torch.rand(2, 2, 1, 16, 16, generator=torch.Generator().manual_seed(0)) * 0.9 + 0.1
     with warnings.catch_warnings():

@@ -5,7 +5,13 @@ from __future__ import annotations
 import pytest
 import torch
 
-from torch_eigview.warp.normalize import foreground_mask, normalize_extent
+from torch_eigview.warp.normalize import (
+    FILLED_FRAME,
+    box_fill,
+    foreground_mask,
+    normalize_extent,
+    resolve_extent,
+)
 
 TOL = {torch.float32: dict(atol=1e-5, rtol=1e-5), torch.float64: dict(atol=1e-10, rtol=1e-10)}
 # kornia's remap goes through normalized coordinates: an identity or integer-aligned map is
@@ -163,3 +169,24 @@ def test_foreground_mask_averages_channels_and_keeps_leading_dims() -> None:
     assert mask.shape == (2, 5, 4, 6)
     assert mask[..., 1, 2].all() and not mask[..., 2, 3].any()
     assert int(mask.sum()) == 10
+
+
+def test_box_fill_is_the_longer_side_of_the_box() -> None:
+    masks = torch.zeros(3, 11, 21, dtype=torch.bool)
+    masks[0, 2:9, 0:21] = True  # spans the width: 20 / 20
+    masks[1, 0:11, 5:8] = True  # spans the height: 10 / 10
+    masks[2, 3:6, 5:16] = True  # 10 / 20 wide, 2 / 10 high
+    assert box_fill(masks).tolist() == pytest.approx([1.0, 1.0, 0.5])
+    assert box_fill(torch.zeros(1, 4, 4, dtype=torch.bool)).tolist() == [0.0]
+
+
+def test_resolve_extent_auto_follows_the_seeds_fill() -> None:
+    filled = torch.zeros(2, 16, 16, dtype=torch.bool)
+    filled[:, 0:16, 4:12] = True  # a size-normalized data set's views (COIL's)
+    margin = torch.zeros(2, 16, 16, dtype=torch.bool)
+    margin[:, 3:13, 4:12] = True  # a photograph: 9 / 15 of the frame
+    assert resolve_extent("auto", filled) and not resolve_extent("auto", margin)
+    mixed = torch.stack([filled[0], margin[0]])  # one seed with a margin: not a normalized set
+    assert not resolve_extent("auto", mixed)
+    assert resolve_extent(True, margin) and not resolve_extent(False, filled)
+    assert 0.5 < FILLED_FRAME < 1.0

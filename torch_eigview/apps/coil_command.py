@@ -149,7 +149,19 @@ def add_synthesis_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="silhouette-aware sampling: only the seeds' foreground enters a synthesized pixel",
     )
-    parser.add_argument("--no-extent", action="store_true", help="do not size-normalize synthesized views")
+    parser.add_argument(
+        "--extent",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="size-normalize synthesized views as a size-normalized data set's (COIL's) are: auto "
+        "(default) when every seed view's object fills the frame",
+    )
+    parser.add_argument(
+        "--no-extent", dest="extent", action="store_const", const="off", help="the same as --extent off"
+    )
+
+
+_EXTENT: dict[str, bool | str] = {"auto": "auto", "on": True, "off": False}
 
 
 def synthesis_options(args: argparse.Namespace) -> SynthesisOptions:
@@ -159,7 +171,7 @@ def synthesis_options(args: argparse.Namespace) -> SynthesisOptions:
     return SynthesisOptions(
         flow=args.flow,
         elevation=args.elevation,
-        extent=not args.no_extent,
+        extent=_EXTENT[args.extent],
         blend=args.blend,
         silhouette=args.silhouette,
     )

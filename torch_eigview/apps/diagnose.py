@@ -30,7 +30,7 @@ from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions, pair_geometry
-from torch_eigview.warp.normalize import foreground_mask, normalize_extent
+from torch_eigview.warp.normalize import foreground_mask, normalize_extent, resolve_extent
 from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = ["ABLATIONS", "center_table", "circle_table", "main", "synthesis_error"]
@@ -69,7 +69,7 @@ def _pair_error(
     warped = warp.apply_maps(maps, torch.cat(channels, dim=2), masks)[0]
     both = (maps.hit[0] & maps.hit[1])[0].to(seeds.dtype)[:, None]
     warped[:, -1:] = both
-    if opts.extent:
+    if resolve_extent(opts.extent, foreground_mask(seeds, opts.background)):
         warped = normalize_extent(warped, warped[:, -2] > 0.5)
     views, both_seen = warped[:, :-2], warped[:, -1] > 0.5
     err = (views - real).abs().mean(dim=1)

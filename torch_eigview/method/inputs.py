@@ -19,7 +19,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
-from torch_eigview.warp.normalize import foreground_mask, seed_foreground
+from torch_eigview.warp.normalize import box_fill, foreground_mask, seed_foreground
 
 __all__ = [
     "ALL_COMPONENTS",
@@ -197,24 +197,9 @@ def check_labels(labels: object, n_objects: int) -> list[int]:
     return [check_int(v, f"labels[{i}]") for i, v in enumerate(labels)]
 
 
-def _box_fill(masks: torch.Tensor) -> torch.Tensor:
-    """(V,) how much of the frame each (V, H, W) mask's bounding box fills, by the rule of
-    ``normalize_extent`` (the side that reaches the frame first); 0 for an empty mask."""
-    h, w = masks.shape[-2:]
-
-    def span(along: torch.Tensor) -> torch.Tensor:
-        idx = torch.arange(along.shape[-1], device=along.device)
-        first = torch.where(along, idx, along.shape[-1]).amin(dim=-1)
-        return (torch.where(along, idx, -1).amax(dim=-1) - first).clamp_min(0)
-
-    fill_y = span(masks.any(dim=-1)) / max(h - 1, 1)
-    fill_x = span(masks.any(dim=-2)) / max(w - 1, 1)
-    return torch.maximum(fill_x, fill_y)
-
-
 def warn_unnormalized_seeds(objects: list[torch.Tensor], options: SynthesisOptions) -> None:
-    """Warns when ``options.extent`` would size-normalize the synthesized views of seed views
-    that are not size-normalized themselves.
+    """Warns when ``options.extent=True`` would size-normalize the synthesized views of seed
+    views that are not size-normalized themselves (``"auto"`` decides from the seeds).
 
     The gallery would then hold every view scaled to fill the frame while the seed views
     and test views like them are not: they lie far from every gallery view (measured on
@@ -224,11 +209,11 @@ def warn_unnormalized_seeds(objects: list[torch.Tensor], options: SynthesisOptio
 
     Args:
         objects: per object its (V, C, H, W) seed views.
-        options: the synthesis options; nothing is checked when ``extent`` is off.
+        options: the synthesis options; nothing is checked unless ``extent`` is True.
     """
-    if not options.extent:
+    if options.extent is not True:
         return
-    fills = torch.cat([_box_fill(foreground_mask(v, options.background)) for v in objects])
+    fills = torch.cat([box_fill(foreground_mask(v, options.background)) for v in objects])
     if float(fills.min()) < UNNORMALIZED_FILL:
         warnings.warn(
             f"options.extent=True size-normalizes the synthesized views, but a seed view's object "

@@ -14,7 +14,20 @@ from kornia.geometry.transform import remap
 
 from torch_eigview.check import check_float_tensor, check_ndim
 
-__all__ = ["foreground_mask", "normalize_extent", "seed_foreground"]
+__all__ = [
+    "FILLED_FRAME",
+    "box_fill",
+    "foreground_mask",
+    "normalize_extent",
+    "resolve_extent",
+    "seed_foreground",
+]
+
+FILLED_FRAME = 0.95
+"""A view whose object's bounding box spans at least this fraction of the frame (its
+longer side, by :func:`normalize_extent`'s rule) counts as size-normalized. A normalized
+data set fills the frame to the pixel (every COIL-20 view: 1.0); a photograph of an
+object on a table or a turntable leaves a margin."""
 
 
 def foreground_mask(images: torch.Tensor, threshold: float = 0.05) -> torch.Tensor:
@@ -70,6 +83,42 @@ def _first_last(any_along: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     last = torch.where(any_along, idx, -1).amax(dim=-1)
     empty = last < 0
     return torch.where(empty, 0, first), torch.where(empty, n - 1, last)
+
+
+def box_fill(masks: torch.Tensor) -> torch.Tensor:
+    """How much of the frame each mask's bounding box fills, by :func:`normalize_extent`'s rule.
+
+    Args:
+        masks: (P, H, W) bool foreground masks.
+
+    Returns:
+        (P,) the larger of the box's width / (W - 1) and height / (H - 1), the side that
+        reaches the frame first when the box is scaled; 0 for an empty mask.
+    """
+    h, w = masks.shape[-2:]
+    y0, y1 = _first_last(masks.any(dim=-1))
+    x0, x1 = _first_last(masks.any(dim=-2))
+    empty = ~masks.flatten(-2).any(dim=-1)
+    fill = torch.maximum((x1 - x0) / max(w - 1, 1), (y1 - y0) / max(h - 1, 1))
+    return torch.where(empty, 0.0, fill)
+
+
+def resolve_extent(extent: bool | str, masks: torch.Tensor) -> bool:
+    """Whether to size-normalize views synthesized from seeds with foreground ``masks``.
+
+    Args:
+        extent: True or False as it is; ``"auto"``: True when every seed view's object
+            fills the frame (:data:`FILLED_FRAME`), the mark of a size-normalized data set
+            whose synthesized views must be normalized the same way, and False for
+            photographs that leave a margin round the object.
+        masks: (V, H, W) bool foreground masks of the seed views.
+
+    Returns:
+        A bool.
+    """
+    if extent != "auto":
+        return bool(extent)
+    return bool((box_fill(masks) >= FILLED_FRAME).all())
 
 
 def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
