@@ -60,6 +60,13 @@ def add_evaluate_command(sub: argparse._SubParsersAction[argparse.ArgumentParser
         default="nearest",
         help="the reported pose: the nearest gallery view's, or interpolated between its neighbours",
     )
+    ev.add_argument(
+        "--reject",
+        action="store_true",
+        help="answer 'unknown' where the model's calibrated rejection says so (eigview fit --reject-rate): "
+        "report the known views rejected, the unknown objects' views rejected and the accuracy on the "
+        "accepted known views",
+    )
     ev.add_argument("--json", metavar="FILE", help="write the results as JSON")
     add_quiet(ev)
     add_threads(ev)
@@ -77,7 +84,10 @@ class Evaluation:
         n_test: the views scored.
         skipped: ``{"row": manifest line or file, "error": message}`` of each row left out.
         unknown_objects: views per object name that the model does not know.
-        rejection: the rejection figures, None while the recognizer rejects nothing.
+        rejection: with ``--reject``: ``known_rejected`` and ``unknown_rejected`` (fractions
+            of the known objects' and of the unknown objects' views answered "unknown", the
+            latter None without such views), ``accuracy_accepted`` (% correct among the
+            known views accepted), the counts and the thresholds; else None.
     """
 
     accuracy: float
@@ -146,6 +156,54 @@ def _tests(
             yield obj, table[obj], torch.stack(images), truth
 
 
+class _Rejections:
+    """Counts what rejection answers on the views passing through :meth:`watch`."""
+
+    def __init__(self, recognizer: NearestNeighborRecognizer) -> None:
+        if not recognizer.rejects:
+            raise ValueError(
+                "--reject needs a model with calibrated rejection (eigview fit without --no-reject); "
+                "this one has none"
+            )
+        self.recognizer = recognizer
+        self.known = self.known_rejected = self.accepted_correct = 0
+        self.unknown = self.unknown_rejected = 0
+
+    def watch(
+        self, tests: Iterator[tuple[str, int, torch.Tensor, torch.Tensor]], known: bool
+    ) -> Iterator[tuple[str, int, torch.Tensor, torch.Tensor]]:
+        import torch
+
+        for item in tests:
+            with torch.no_grad():
+                out = self.recognizer.predict(item[2], reject=True)
+            assert out.known is not None
+            rejected = int((~out.known).sum())
+            if known:
+                self.known += len(out.known)
+                self.known_rejected += rejected
+                self.accepted_correct += int((out.known & (out.labels == item[1])).sum())
+            else:
+                self.unknown += len(out.known)
+                self.unknown_rejected += rejected
+            yield item
+
+    def figures(self) -> dict[str, Any]:
+        accepted = self.known - self.known_rejected
+        t_dffs, t_difs = (float(t) for t in self.recognizer.reject_thresholds)
+        return {
+            "known_rejected": self.known_rejected / self.known if self.known else None,
+            "unknown_rejected": self.unknown_rejected / self.unknown if self.unknown else None,
+            "accuracy_accepted": 100.0 * self.accepted_correct / accepted if accepted else None,
+            "n_known": self.known,
+            "n_unknown": self.unknown,
+            "thresholds": {
+                "dffs": t_dffs if math.isfinite(t_dffs) else None,
+                "difs": t_difs if math.isfinite(t_difs) else None,
+            },
+        }
+
+
 def evaluate(
     recognizer: NearestNeighborRecognizer,
     prep: Preprocessing,
@@ -153,6 +211,7 @@ def evaluate(
     *,
     skipped: list[dict[str, str]] | None = None,
     interpolate_pose: bool = False,
+    reject: bool = False,
 ) -> Evaluation:
     """Recognizes and scores ``entries`` (a manifest's views) with a model and its preprocessing.
 
@@ -162,9 +221,12 @@ def evaluate(
         entries: the views, grouped by object in the order of their first view.
         skipped: rows already left out (bad manifest lines); unreadable views are added.
         interpolate_pose: score the pose interpolated on the appearance manifold.
+        reject: also score the model's rejection on the known objects' views and on the
+            views of objects it does not know (:attr:`Evaluation.rejection`).
 
     Raises:
-        ValueError: no view of an object the model knows could be read.
+        ValueError: no view of an object the model knows could be read; ``reject`` with a
+            model that has no calibrated rejection.
     """
     from torch_eigview.apps.protocol import score
 
@@ -177,7 +239,10 @@ def evaluate(
             groups.setdefault(e.object, []).append(e)
         else:
             unknown[e.object] = unknown.get(e.object, 0) + 1
+    rejections = _Rejections(recognizer) if reject else None
     tests = _tests(groups, table, prep, recognizer.codes.dtype, skipped)  # one object in memory at a time
+    if rejections is not None:
+        tests = rejections.watch(tests, known=True)
     first = next(tests, None)
     if first is None:
         known = ", ".join(list(table)[:10])
@@ -185,6 +250,15 @@ def evaluate(
             f"no view of an object the model knows ({known}) could be read; {len(skipped)} rows skipped"
         )
     result = score(recognizer, itertools.chain([first], tests), wrap=True, interpolate_pose=interpolate_pose)
+    if rejections is not None:
+        others: dict[str, list[ViewEntry]] = {}
+        for e in entries:
+            if e.object not in table:
+                others.setdefault(e.object, []).append(e)
+        for _ in rejections.watch(
+            _tests(others, dict.fromkeys(others, -1), prep, recognizer.codes.dtype, skipped), False
+        ):
+            pass
     return Evaluation(
         result.accuracy,
         dict(result.per_object),
@@ -193,6 +267,7 @@ def evaluate(
         result.n_test,
         skipped,
         unknown,
+        None if rejections is None else rejections.figures(),
     )
 
 
@@ -208,6 +283,18 @@ def format_evaluation(ev: Evaluation, title: str) -> str:
     if ev.unknown_objects:
         lines.append(
             f"views of objects the model does not know: {sum(ev.unknown_objects.values())} (not scored)"
+        )
+    if ev.rejection is not None:
+        r = ev.rejection
+
+        def pct(value: float | None) -> str:
+            return "-" if value is None else f"{100 * value:.1f}%"
+
+        acc = "-" if r["accuracy_accepted"] is None else f"{r['accuracy_accepted']:.2f}%"
+        lines.append(
+            f"rejection: known views rejected {pct(r['known_rejected'])} of {r['n_known']}, unknown objects' "
+            f"views rejected {pct(r['unknown_rejected'])} of {r['n_unknown']}, accuracy on the accepted known "
+            f"views {acc}"
         )
     if ev.skipped:
         lines.append(f"rows skipped: {len(ev.skipped)} (listed on stderr)")
@@ -233,7 +320,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
         entries = [
             e for e in entries if not any(abs((e.azimuth - a + 180.0) % 360.0 - 180.0) <= 1e-6 for a in seeds)
         ]
-    ev = evaluate(recognizer, prep, entries, skipped=skipped, interpolate_pose=args.pose == "interpolate")
+    ev = evaluate(
+        recognizer,
+        prep,
+        entries,
+        skipped=skipped,
+        interpolate_pose=args.pose == "interpolate",
+        reject=args.reject,
+    )
     for row in ev.skipped:
         print(f"eigview evaluate: skipped {escape(row['row'])}: {escape(row['error'])}", file=sys.stderr)
     print(format_evaluation(ev, f"eigview evaluate: {args.model} on {manifest.name}"))

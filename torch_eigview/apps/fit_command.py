@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -95,6 +96,27 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     add_synthesis_arguments(fit)
     fit.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
+    fit.add_argument(
+        "--reject-rate",
+        type=_rate_arg,
+        default=0.05,
+        metavar="R",
+        help="calibrate the rejection of unknown objects so that a fraction R in (0, 1) of the known "
+        "objects' held-out synthesized views is rejected (default 0.05; evaluate/predict --reject use it)",
+    )
+    fit.add_argument(
+        "--no-reject", dest="reject_rate", action="store_const", const=None, help="calibrate no rejection"
+    )
+    fit.add_argument(
+        "--reject-poses",
+        type=finite_arg("--reject-poses"),
+        nargs=3,
+        default=(-45.0, 45.0, 2.5),
+        metavar=("START", "STOP", "STEP"),
+        help="angles from the first seed of the held-out views rejection is calibrated on, the gallery's "
+        "angles left out: where the known objects will be seen (default -45 45 2.5; with --seeds M the "
+        "midpoints between gallery views all round)",
+    )
     fit.add_argument("--out", required=True, metavar="FILE", help="the model file to write")
     add_quiet(fit)
     add_threads(fit)
@@ -118,6 +140,17 @@ class SeedPlan:
     alpha: float | list[float]
     thetas: list[float] | None
     step: float
+
+
+def _rate_arg(text: str) -> float:
+    """``--reject-rate R``: a number in (0, 1) (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"--reject-rate must be a number in (0, 1), got {text!r}")
+    return value
 
 
 def _wrap(angle: float) -> float:
@@ -191,23 +224,55 @@ def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[
     return picked
 
 
+def held_out_thetas(plan: SeedPlan, poses: tuple[float, float, float] | None) -> list[float]:
+    """Angles (from the first seed) of the views that calibrate rejection, none a gallery angle.
+
+    Listed seeds: ``angle_range(*poses)`` less the gallery's angles. The full circle: the
+    midpoints between consecutive gallery angles all round (``poses`` unused; only their
+    number matters, the views come from :func:`_gallery`).
+    """
+    from torch_eigview.geometry.angles import angle_range
+
+    if poses is None:
+        return []
+    if plan.thetas is None:
+        return [t + plan.step / 2 for t in angle_range(0.0, 360.0 - plan.step, plan.step, "--synth")]
+    held = [t for t in angle_range(*poses, "--reject-poses") if min(abs(t - g) for g in plan.thetas) > _TOL]
+    if not held:
+        raise ValueError(
+            f"--reject-poses {poses} holds gallery angles only: the views must lie off the gallery"
+        )
+    return held
+
+
 def _gallery(
-    seeds: tuple[torch.Tensor, torch.Tensor | None], plan: SeedPlan, options: SynthesisOptions, obj: str
-) -> tuple[torch.Tensor, list[float]]:
-    """One object's synthesized gallery views and their poses (degrees, unwrapped), from its
-    seed views (V, C, H, W) and their masks (V, H, W) or None (the brightness threshold)."""
+    seeds: tuple[torch.Tensor, torch.Tensor | None],
+    plan: SeedPlan,
+    options: SynthesisOptions,
+    obj: str,
+    held: list[float],
+) -> tuple[torch.Tensor, list[float], torch.Tensor]:
+    """One object's synthesized gallery views and their poses (degrees, unwrapped), and its
+    views at the ``held`` angles (from :func:`held_out_thetas`), from its seed views
+    (V, C, H, W) and their masks (V, H, W) or None (the brightness threshold)."""
     from torch_eigview.apps.circle import synthesize_circle
     from torch_eigview.synthesis import synthesize_views
 
     views, masks = seeds
     try:
         if plan.thetas is None:
-            out = synthesize_circle(views, plan.step, options, masks=masks)
+            out = synthesize_circle(views, plan.step / (2 if held else 1), options, masks=masks)
+            if held:  # the gallery's views at multiples of step from their seed, the midpoints between
+                alpha = 360.0 / len(plan.azimuths)
+                half = ((out.thetas - out.pairs * alpha) / (plan.step / 2)).round().long() % 2 == 1
+                poses = [plan.first + t for t in out.thetas[~half].tolist()]
+                return out.views[~half], poses, out.views[half]
         else:
-            out = synthesize_views(views, plan.alpha, plan.thetas, options, masks=masks)
+            out = synthesize_views(views, plan.alpha, plan.thetas + held, options, masks=masks)
     except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
         raise ValueError(f"object {obj!r}: synthesis failed: {exc}") from exc
-    return out.views, [plan.first + t for t in out.thetas.tolist()]
+    n = len(out.thetas) - len(held)
+    return out.views[:n], [plan.first + t for t in out.thetas[:n].tolist()], out.views[n:]
 
 
 def _read_seeds(
@@ -256,29 +321,45 @@ def run_fit(args: argparse.Namespace) -> int:
     background = background_model(prep)
     options = synthesis_options(args)
 
+    reject_poses = None if args.reject_rate is None else tuple(args.reject_poses)
+    held = held_out_thetas(plan, reject_poses)
+    held_views: list[torch.Tensor] = []
+
     def blocks() -> Iterator[tuple[torch.Tensor, int, list[float]]]:
         loop = progress_bar(args.quiet, "fit objects", "obj")
         for label, obj in enumerate(loop(objects) if loop else objects):
             seeds = _read_seeds(picked[obj], size, channels, background)
-            views, poses = _gallery(seeds, plan, options, obj)
+            views, poses, held_out = _gallery(seeds, plan, options, obj, held)
+            held_views.append(held_out)
             yield views, label, poses
 
     x, labels, poses = stack_gallery(blocks())
     recognizer = build_recognizer(
         x, labels, wrap_degrees(poses), args.components, unit_norm=unit_norm, label_names=objects
     )
+    if args.reject_rate is not None:
+        import torch
+
+        from torch_eigview.method.rejection import calibrate_rejection
+
+        calibrate_rejection(recognizer, torch.cat(held_views).to(x.dtype), args.reject_rate)
     meta = {
         "command": "fit",
         "preprocessing": prep.to_json(),
         "seed_azimuths": plan.azimuths,
         "synth": list(args.synth),
         "n_train_views": int(x.shape[0]),
+        "reject_rate": args.reject_rate,
+        "reject_poses": None if reject_poses is None else list(reject_poses),
         "manifest": manifest.name,
     }
     save_recognizer(args.out, recognizer, meta)
     k = recognizer.projection.n_components
+    rejects = (
+        "" if args.reject_rate is None else f", rejection calibrated on {sum(map(len, held_views))} views"
+    )
     print(
         f"wrote {args.out}: {len(objects)} objects, {x.shape[0]} gallery views of (C, H, W)={tuple(x.shape[1:])}, "
-        f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees"
+        f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees{rejects}"
     )
     return 0
