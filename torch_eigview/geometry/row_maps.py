@@ -53,10 +53,6 @@ def invert_row_map(
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
     if w < 2 or not bool(seg_ok.any()):
         return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
-    finite = torch.isfinite(dst_x_for_src)  # a non-finite end (map or depth): no surface
-    if depth is not None:
-        finite &= torch.isfinite(depth)
-    seg_ok &= finite[..., :-1] & finite[..., 1:]
     parts = _segment_columns(dst_x_for_src, depth, seg_ok)
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
@@ -96,24 +92,32 @@ def _segment_columns(
     b, t, h, w = dst.shape
     dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
     fields = [dst] if depth is None else [dst, depth]
-    seg = None
-    if 2 * int(seg_ok.sum()) >= seg_ok.numel():
+    dense = 2 * int(seg_ok.sum()) >= seg_ok.numel()
+    if dense:
         ends = [(v[..., :-1], v[..., 1:]) for v in fields]
         k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
         row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
     else:
-        seg = seg_ok.reshape(-1).nonzero().squeeze(1)
-        left = seg + seg // w1  # source pixel k of the segment, flat in (B, T, H, W)
+        # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
+        row, k_int = seg_ok.reshape(-1, w1).nonzero().unbind(1)
+        row_start = row * w
+        left = row_start + k_int  # source pixel k of the segment, flat in (B, T, H, W)
         ends = [
             (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
         ]
-        k, row_start = (seg % w1).to(dtype), (seg // w1) * w
+        k = k_int.to(dtype)
+    # A non-finite end (map or depth) is no surface: checked on the whole map when most
+    # segments pass, on the gathered ends otherwise.
+    if dense:
+        finite = _all_finite(fields)
+        ok = seg_ok & finite[..., :-1] & finite[..., 1:]
+    else:
+        ok = _all_finite([v for pair in ends for v in pair])
     (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
     length = f1 - f0
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.floor(f1).clamp(max=w - 1) - col0
-    if seg is None:
-        room = torch.where(seg_ok, room, -1.0)
+    room = torch.where(ok, room, -1.0)
     ok0 = room >= 0
     src0, key0 = _interpolate((col0 - f0) / length, k, dd)
     idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
@@ -125,7 +129,7 @@ def _segment_columns(
     while cand.numel():
         c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
         col = c0 + m
-        if seg is None:
+        if dense:
             lo, start = (cand % w1).to(dtype), (cand // w1) * w
         else:
             lo, start = k.index_select(0, cand), row_start.index_select(0, cand)
@@ -139,6 +143,14 @@ def _segment_columns(
         m += 1
         cand = cand[flat[3].index_select(0, cand) >= m]
     return parts
+
+
+def _all_finite(values: list[torch.Tensor]) -> torch.Tensor:
+    """Elementwise: every one of ``values`` (of one shape) is finite."""
+    out = torch.isfinite(values[0])
+    for v in values[1:]:
+        out &= torch.isfinite(v)
+    return out
 
 
 def _interpolate(
