@@ -25,10 +25,14 @@ def _invert_row_map_loop(
             for r in range(h):
                 f = dst[i, j, r].tolist()
                 v = (valid[i] if valid.ndim == 3 else valid[i, j])[r].tolist()
+                d = None if depth is None else depth[i, j, r].tolist()
                 for k in range(w - 1):
                     length = f[k + 1] - f[k]
                     if not (v[k] and v[k + 1] and 0 < length <= max_stretch):
                         continue
+                    ends = f[k : k + 2] + ([] if d is None else d[k : k + 2])
+                    if not all(math.isfinite(e) for e in ends):
+                        continue  # a non-finite end (map or depth): no surface
                     for col in range(w):
                         if not f[k] <= col <= f[k + 1]:
                             continue
@@ -98,6 +102,23 @@ def test_invert_row_map_sparse_and_dense_segments(use_depth: bool, valid_rate: f
         )
         assert torch.equal(one[1], hit[i : i + 1])
         assert torch.equal(one[0][one[1]], src[i : i + 1][hit[i : i + 1]])
+
+
+@pytest.mark.parametrize("use_depth", [True, False])
+@pytest.mark.parametrize("valid_rate", [0.3, 1.0])
+def test_invert_row_map_non_finite_ends(use_depth: bool, valid_rate: float) -> None:
+    """A segment with an infinite or NaN end, in the map or the depth, is left out: in the
+    sparse regime (checked on the gathered ends) as in the dense one (on the whole map)."""
+    b, t, h, w = 2, 1, 4, 10
+    dst = (0.4 + rand(b, t, h, w, seed=31)).cumsum(-1) - 1.0
+    depth = rand(b, t, h, w, seed=32) if use_depth else None
+    valid = rand(b, h, w, seed=33) < valid_rate
+    valid[:, :, 2:6] = True  # segments that would pass but for their ends
+    dst[0, 0, 0, 3], dst[0, 0, 1, 4], dst[1, 0, 2, 5] = math.inf, math.nan, -math.inf
+    if depth is not None:
+        depth[1, 0, 3, 3], depth[0, 0, 2, 2] = math.inf, math.nan
+    for stretch in (math.inf, 2.0):
+        _check_inverse(dst, valid, depth, stretch)
 
 
 @pytest.mark.parametrize("use_depth", [True, False])
@@ -185,3 +206,29 @@ def test_fill_row_holes() -> None:
     )
     torch.testing.assert_close(row[6:], f[6:] + (s[5] - f[5]))  # beyond the last hit
     torch.testing.assert_close(row[:2], f[:2] + (s[2] - f[2]))  # before the first hit
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fill_row_holes_object_rows(dtype: torch.dtype) -> None:
+    """Rows as an object on a background leaves them: a run of hits with gaps inside
+    (interpolated), background on both sides (the shifted fallback), rows with a single hit,
+    with hits at both borders, all hits, none; any leading shape, NaN off the hits."""
+    w = 11
+    rows = [
+        [0, 0, 1, 1, 0, 0, 1, 1, 1, 0, 0],
+        [0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0],
+        [1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1],
+        [1] * w,
+        [0] * w,
+        [0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0],
+    ]
+    hit = torch.tensor(rows, dtype=torch.bool).repeat(2, 2, 1).view(2, 2, 6, w)
+    src = torch.where(hit, (12 * rand(2, 2, 6, w, seed=41)).to(dtype), math.nan)
+    fallback = (1.1 * torch.arange(w, dtype=dtype) - 0.3)[None, :] * (1 + rand(2, 1, 1, 1, seed=42)).to(dtype)
+    filled = fill_row_holes(src, hit, fallback)
+    assert filled.dtype == dtype and bool(torch.isfinite(filled).all())
+    ref = _fill_row_holes_loop(src.double(), hit, fallback.double().expand_as(src)).to(dtype)
+    torch.testing.assert_close(filled, ref, atol=1e-5 if dtype == torch.float32 else 1e-12, rtol=0)
+    assert torch.equal(filled[hit], src[hit])
+    flat = fill_row_holes(src.reshape(-1, w), hit.reshape(-1, w), fallback.expand_as(src).reshape(-1, w))
+    assert torch.equal(flat.view_as(filled), filled)  # rows are independent of their batching

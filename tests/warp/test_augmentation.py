@@ -93,6 +93,24 @@ def test_objects_on_a_background_batched_equal_the_per_object_maps_bit_for_bit(e
             assert torch.equal(got[:, i : i + 1], ref), field
 
 
+def test_rendered_objects_one_call_equals_the_loop_over_samples_bit_for_bit() -> None:
+    """The benchmark's case, small: different rendered objects on black with their exact
+    correspondences, each turned by its own θ in one call, equal the per-sample warps."""
+    from torch_eigview.datasets import SHAPES, OrthographicCamera, exact_correspondence, make_object, render
+
+    camera, alpha = OrthographicCamera(20), 10.0
+    objs = [make_object(shape) for shape in SHAPES[:4]]
+    view1 = torch.stack([render(obj, 0.0, camera).image for obj in objs])
+    view2 = torch.stack([render(obj, alpha, camera).image for obj in objs])
+    corr = Correspondence.collate([exact_correspondence(obj, alpha, camera) for obj in objs])
+    aug = RandomTurntableRotation(20.0, alpha, p=1.0, generator=torch.Generator().manual_seed(2))
+    out = aug(view1, view2, correspondence=corr)
+    assert float(corr.valid_12.float().mean()) < 0.6  # mostly background, as rendered
+    for i, theta in enumerate(aug._params["degrees"].tolist()):
+        one = aug.warp(view1[i : i + 1], view2[i : i + 1], correspondence=corr[i], thetas=[theta])
+        assert torch.equal(out[i : i + 1], one[:, 0])
+
+
 def test_affine_camera_per_object_angles() -> None:
     camera = torch.tensor([[2.0, 0.0, 0.0, 4.0], [0.0, -2.0, 0.0, 3.0]], dtype=torch.float64)
     view1, view2, corr = _objects(2)

@@ -166,6 +166,22 @@ def test_fill_row_holes_equals_former_bit_for_bit(dtype: torch.dtype, hit_rate: 
     assert torch.equal(fill_row_holes(src, hit, fallback), _old_fill_row_holes(src, hit, fallback))
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fill_row_holes_object_rows_equal_former_bit_for_bit(dtype: torch.dtype) -> None:
+    """Hits in runs with gaps (an object's rows on a background), as the warp's maps have
+    them: interiors interpolated, exteriors shifted, empty rows the fallback, bit for bit."""
+    g = torch.Generator().manual_seed(5)
+    b, h, w = 3, 9, 23
+    start = torch.randint(0, w, (b, 1, h, 1), generator=g)
+    stop = start + torch.randint(0, w, (b, 1, h, 1), generator=g)
+    cols = torch.arange(w)
+    hit = (cols >= start) & (cols < stop) & (torch.rand(b, 1, h, w, generator=g) < 0.8)
+    src = torch.where(hit, torch.rand(b, 1, h, w, generator=g, dtype=dtype) * 20, math.nan)
+    scale = 1 + torch.rand(b, 1, 1, 1, generator=g, dtype=dtype)
+    fallback = (7.0 + (torch.arange(w, dtype=dtype) - 7.0) * scale).expand_as(src)
+    assert torch.equal(fill_row_holes(src, hit, fallback), _old_fill_row_holes(src, hit, fallback))
+
+
 @pytest.mark.parametrize("tilt_deg", [0.0, 14.0])
 @pytest.mark.parametrize("shared", [True, False])
 def test_apply_maps_equals_kornia_remap_bit_for_bit(tilt_deg: float, shared: bool) -> None:

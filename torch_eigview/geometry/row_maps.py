@@ -53,10 +53,6 @@ def invert_row_map(
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
     if w < 2 or not bool(seg_ok.any()):
         return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
-    finite = torch.isfinite(dst_x_for_src)  # a non-finite end (map or depth): no surface
-    if depth is not None:
-        finite &= torch.isfinite(depth)
-    seg_ok &= finite[..., :-1] & finite[..., 1:]
     parts = _segment_columns(dst_x_for_src, depth, seg_ok)
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
@@ -96,24 +92,32 @@ def _segment_columns(
     b, t, h, w = dst.shape
     dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
     fields = [dst] if depth is None else [dst, depth]
-    seg = None
-    if 2 * int(seg_ok.sum()) >= seg_ok.numel():
+    dense = 2 * int(seg_ok.sum()) >= seg_ok.numel()
+    if dense:
         ends = [(v[..., :-1], v[..., 1:]) for v in fields]
         k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
         row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
     else:
-        seg = seg_ok.reshape(-1).nonzero().squeeze(1)
-        left = seg + seg // w1  # source pixel k of the segment, flat in (B, T, H, W)
+        # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
+        row, k_int = seg_ok.reshape(-1, w1).nonzero().unbind(1)
+        row_start = row * w
+        left = row_start + k_int  # source pixel k of the segment, flat in (B, T, H, W)
         ends = [
             (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
         ]
-        k, row_start = (seg % w1).to(dtype), (seg // w1) * w
+        k = k_int.to(dtype)
+    # A non-finite end (map or depth) is no surface: checked on the whole map when most
+    # segments pass, on the gathered ends otherwise.
+    if dense:
+        finite = _all_finite(fields)
+        ok = seg_ok & finite[..., :-1] & finite[..., 1:]
+    else:
+        ok = _all_finite([v for pair in ends for v in pair])
     (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
     length = f1 - f0
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.floor(f1).clamp(max=w - 1) - col0
-    if seg is None:
-        room = torch.where(seg_ok, room, -1.0)
+    room = torch.where(ok, room, -1.0)
     ok0 = room >= 0
     src0, key0 = _interpolate((col0 - f0) / length, k, dd)
     idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
@@ -125,7 +129,7 @@ def _segment_columns(
     while cand.numel():
         c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
         col = c0 + m
-        if seg is None:
+        if dense:
             lo, start = (cand % w1).to(dtype), (cand // w1) * w
         else:
             lo, start = k.index_select(0, cand), row_start.index_select(0, cand)
@@ -139,6 +143,14 @@ def _segment_columns(
         m += 1
         cand = cand[flat[3].index_select(0, cand) >= m]
     return parts
+
+
+def _all_finite(values: list[torch.Tensor]) -> torch.Tensor:
+    """Elementwise: every one of ``values`` (of one shape) is finite."""
+    out = torch.isfinite(values[0])
+    for v in values[1:]:
+        out &= torch.isfinite(v)
+    return out
 
 
 def _interpolate(
@@ -155,55 +167,68 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     """Fills non-hit target pixels by interpolating the map between hits along the row.
 
     Beyond the last hit of a row the fallback map, shifted to meet that hit, continues
-    it; a row with no hit takes the fallback map.
+    it (likewise before the first hit); a row with no hit takes the fallback map.
+
+    A row splits into its exterior, before its first hit and after its last, where the
+    map is the fallback plus one shift per side, and its interior, from the first hit to
+    the last, where holes interpolate between their neighbouring hits. The exterior is a
+    few whole-grid float passes; only the interior (the object's extent) is gathered,
+    scanned and written back, so a view that is mostly background costs little more
+    than the fallback itself.
 
     Args:
-        src: (..., W) map, trusted where ``hit``.
+        src: (..., W) map, trusted where ``hit`` (any value elsewhere, NaN included).
         hit: (..., W) bool, of the shape of ``src``.
         fallback: map broadcastable to ``src`` (an expanded tensor is not copied).
 
     Returns:
         (..., W) the map with its holes filled (a new tensor).
     """
-    w = src.shape[-1]
-    n_holes = int((~hit).sum())
-    if n_holes == 0:
+    shape, w = src.shape, src.shape[-1]
+    if src.numel() == 0 or bool(hit.all()):
         return src.clone()
-    # The nearest hit before and after each pixel: a running max / min over the row.
-    cols = torch.arange(w, dtype=torch.int32, device=src.device)
-    prev = torch.where(hit, cols, -1).cummax(dim=-1).values
-    nxt = torch.where(hit, cols, w).flip(-1).cummin(dim=-1).values.flip(-1)
-    fb = fallback.expand_as(src)
-    if 2 * n_holes >= hit.numel():
-        # Mostly holes (a background around the object): every pixel, gathered along rows.
-        p, n = prev.long(), nxt.long()
-        taps = [v.gather(-1, i.clamp(0, w - 1)) for v in (src, fb) for i in (p, n)]
-        filled = _fill_values(p, n, cols.long(), taps, fb, w)
-        return torch.where(hit, src, filled)
-    # Mostly hits (a warp's map): the holes alone, gathered flat.
-    holes = (~hit).reshape(-1).nonzero().squeeze(1)
-    col = holes % w
-    row = holes - col
-    p, n = (v.reshape(-1).index_select(0, holes).long() for v in (prev, nxt))
-    flat = (src.reshape(-1), fb.contiguous().reshape(-1))  # one copy, not one per gather
-    taps = [v.index_select(0, row + i.clamp(0, w - 1)) for v in flat for i in (p, n)]
-    out = src.reshape(-1).clone()
-    out.index_put_((holes,), _fill_values(p, n, col, taps, flat[1].index_select(0, holes), w))
-    return out.view(src.shape)
+    dtype, device = src.dtype, src.device
+    src_rows, hit_rows = src.reshape(-1, w), hit.reshape(-1, w)
+    fb = fallback.expand(shape).reshape(-1, w)  # a view where fallback is an expanded row
+    cols = torch.arange(w, dtype=dtype, device=device)
+    # First and last hit of each row as maxima over the row (w and -1 for a row without one).
+    hitf = hit_rows.to(dtype)
+    first = w - (hitf * (w - cols)).amax(dim=-1, keepdim=True)
+    last = (hitf * (cols + 1)).amax(dim=-1, keepdim=True) - 1
+    has_hit = last >= 0
+    ends = torch.cat([first, last], dim=1).clamp(0, w - 1).long()
+    # The exterior's shift, map minus fallback at the nearest hit; 0 on a row without hits.
+    shift = torch.where(has_hit, src_rows.gather(1, ends) - fb.gather(1, ends), 0.0)
+    out = fb + (first - cols).clamp_(0, 1).mul_(shift[:, :1])
+    out += (cols - last).clamp_(0, 1).mul_(shift[:, 1:])
+    _fill_interior(out.view(-1), src_rows, hit_rows, first, last)
+    return out.view(shape)
 
 
-def _fill_values(
-    p: torch.Tensor, n: torch.Tensor, col: torch.Tensor, taps: list[torch.Tensor], f0: torch.Tensor, w: int
-) -> torch.Tensor:
-    """The filled value at column ``col`` from its previous hit ``p`` (-1: none) and next
-    hit ``n`` (``w``: none); ``taps`` are the map and the fallback at the clamped p and n,
-    ``f0`` the fallback at ``col``. All of one shape."""
-    sp, sn, fp, fn = taps
-    has_prev, has_next = p >= 0, n < w
-    p, n = p.clamp(0, w - 1), n.clamp(0, w - 1)
-    span = (n - p).clamp_min(1).to(sp.dtype)
-    between = sp + (sn - sp) * (col - p).to(sp.dtype) / span
-    left_only = f0 + (sp - fp)
-    right_only = f0 + (sn - fn)
-    filled = torch.where(has_prev & has_next, between, torch.where(has_prev, left_only, right_only))
-    return torch.where(has_prev | has_next, filled, f0)
+def _fill_interior(
+    out: torch.Tensor, src: torch.Tensor, hit: torch.Tensor, first: torch.Tensor, last: torch.Tensor
+) -> None:
+    """Writes into ``out`` (R·W,) the map of every row's interior, columns ``first``..``last``
+    ((R, 1), float): the hits' own values and, between two hits, the linear interpolation
+    of theirs. ``src`` and ``hit`` are (R, W)."""
+    w = src.shape[1]
+    count = (last - first + 1).clamp_(min=0).view(-1).long()
+    total = int(count.sum())
+    if total == 0:
+        return
+    rows = torch.repeat_interleave(torch.arange(count.numel(), device=src.device), count, output_size=total)
+    start = (count.cumsum(0) - count).index_select(0, rows)
+    col = first.view(-1).long().index_select(0, rows) + (torch.arange(total, device=src.device) - start)
+    flat = rows * w + col
+    hit_i = hit.reshape(-1).index_select(0, flat)
+    src_i = src.reshape(-1).index_select(0, flat)
+    # Every interior starts and ends with a hit, so running scans over the concatenated
+    # interiors find each pixel's previous and next hit inside its own row.
+    pos = torch.arange(total, device=src.device)
+    prev = torch.where(hit_i, pos, -1).cummax(dim=0).values
+    nxt = torch.where(hit_i, pos, total).flip(0).cummin(dim=0).values.flip(0)
+    colf = col.to(src.dtype)
+    sp, sn = src_i.index_select(0, prev), src_i.index_select(0, nxt)
+    p, n = colf.index_select(0, prev), colf.index_select(0, nxt)
+    between = sp + (sn - sp) * (colf - p) / (n - p).clamp_min(1)
+    out.index_copy_(0, flat, torch.where(hit_i, src_i, between))
