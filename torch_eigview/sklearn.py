@@ -16,6 +16,8 @@ package: ``pip install 'torch_eigview[sklearn]'``.
 
 from __future__ import annotations
 
+import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -59,6 +61,44 @@ def _check_bool(value: object, name: str) -> bool:
     if not isinstance(value, bool):
         raise TypeError(f"{name} must be a bool, got {value!r}")
     return value
+
+
+def _default_shape(n_features: int, warn: bool) -> tuple[int, int, int]:
+    """The image a row of ``n_features`` values is without ``image_shape``: square grey, or one line."""
+    side = math.isqrt(n_features)
+    if side * side == n_features:
+        return (1, side, side)
+    if warn:
+        warnings.warn(
+            f"image_shape is None and n_features={n_features} is not a square: each row is taken as a "
+            f"1-pixel-high image (1, 1, {n_features}); pass image_shape=(C, H, W) if the rows are images",
+            UserWarning,
+            stacklevel=3,
+        )
+    return (1, 1, n_features)
+
+
+def _seed_runs(rows: list[np.ndarray], poses: np.ndarray, classes: np.ndarray) -> list[np.ndarray]:
+    """Each label's rows split into runs of seeds spanning less than 180°, sharing end seeds.
+
+    ``synthesize_views`` takes the seeds of less than a half turn; each of its seed pairs
+    synthesizes only its own sector, so a run ending where the next begins loses nothing.
+    """
+    runs = []
+    for label, r in zip(classes, rows, strict=True):
+        if r.size < 2:
+            raise ValueError(
+                f"y must give every label 2 rows or more to synthesize views from (synth is not None), "
+                f"got 1 row of label {np.asarray(label).item()!r}; use synth=None to fit the rows alone"
+            )
+        start = 0
+        while start < r.size - 1:
+            stop = start + 1  # a run holds one seed pair at least
+            while stop + 1 < r.size and abs(poses[r[stop + 1]] - poses[r[start]]) < 180.0:
+                stop += 1
+            runs.append(r[start : stop + 1])
+            start = stop
+    return runs
 
 
 class _EigenspaceTransformer(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstimator):
@@ -274,13 +314,24 @@ class FewViewRecognizerClassifier(ClassifierMixin, BaseEstimator):
     over all of them, and ``predict`` gives a row the label of its nearest gallery view
     (``predict_pose``: that view's pose).
 
+    How rows become images: with ``image_shape`` given, each row is a (C, H, W) image;
+    without it, a row of n = s² features is a (1, s, s) grey image and any other row a
+    1-pixel-high image (1, 1, n), one line along the turntable's rows (a warning says
+    so: pass ``image_shape`` for colour or non-square images). The seeds of one label
+    must span less than a half turn for the warp (``synthesize_views``); seeds that
+    span more, e.g. all around the object, are fitted as consecutive runs that each
+    span less than 180° and share their end seeds, every run synthesizing its own
+    views over ``synth``. A label needs two rows or more to synthesize from. The default
+    ``options`` size-normalize each synthesized view as COIL's processed images are
+    (``extent``): rows not normalized that way want ``SynthesisOptions(extent=False)``.
+
     With ``synth=None`` nothing is synthesized: the gallery is the rows themselves, any
     number per label (the experiments' ``sparse`` baseline; images or any other
     features, ``image_shape`` optional).
 
     Args:
         n_components: k (int >= 1), an energy fraction in (0, 1), or None: every component.
-        image_shape: (C, H, W) of the images (needed with ``synth``).
+        image_shape: (C, H, W) of the images, or None: taken from n_features as above.
         alpha: angle in degrees between consecutive seed views of a label, without ``angles``.
         synth, options, unit_norm, kernel, gamma, synth_follows_seeds: as ``FewViewEigenspace``'s.
 
@@ -334,21 +385,24 @@ class FewViewRecognizerClassifier(ClassifierMixin, BaseEstimator):
         check_classification_targets(y)
         self.classes_, index = np.unique(y, return_inverse=True)
         n_features = X.shape[1]
-        if self.synth is not None and self.image_shape is None:
-            raise ValueError("image_shape=(C, H, W) is needed to synthesize views (synth is not None)")
         if self.unit_norm is True and n_features == 1:
             raise ValueError(
                 "unit_norm=True needs 2 features or more: one value scales to ±1, got n_features = 1"
             )
-        shape = check_image_shape(self.image_shape, n_features, "image_shape") or (1, 1, n_features)
+        shape = check_image_shape(self.image_shape, n_features, "image_shape")
+        if shape is None:
+            shape = _default_shape(n_features, warn=self.synth is not None)
         poses = self._angles(angles, index)
         views = _tensor(X).reshape(-1, *shape)
         rows = [np.flatnonzero(index == c) for c in range(len(self.classes_))]
+        if self.synth is not None:
+            rows = _seed_runs(rows, poses, self.classes_)
         # Every parameter but the two that say how rows become seed views is FewViewEigenspace's.
         params = {k: v for k, v in self.get_params().items() if k not in ("image_shape", "alpha")}
         model = FewViewEigenspace(**params)
         seeds = [views[torch.from_numpy(r)] for r in rows]
-        self.model_ = model.fit(seeds, [poses[r].tolist() for r in rows], list(range(len(rows))))
+        labels = [int(index[r[0]]) for r in rows]
+        self.model_ = model.fit(seeds, [poses[r].tolist() for r in rows], labels)
         self.recognizer_ = model.recognizer_
         return self
 
