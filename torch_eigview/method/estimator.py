@@ -145,7 +145,7 @@ class FewViewEigenspace:
         """
         params = self._params()
         objects = check_seeds(seeds)
-        angles = check_angles(seed_angles, objects)
+        angles = check_angles(seed_angles, objects, synthesis=params.synth is not None)
         names = check_labels(labels, len(objects))
         self.elevations_: list[list[float]] = []
         views: list[torch.Tensor] = []

@@ -15,7 +15,15 @@ from dataclasses import dataclass
 import torch
 from torch.utils.data import DataLoader, RandomSampler
 
-from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
+from torch_eigview.check import (
+    VIEW_LIMIT,
+    check_float_tensor,
+    check_int,
+    check_limit,
+    check_n_components,
+    check_ndim,
+    check_number,
+)
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
 
@@ -83,6 +91,7 @@ def check_synth(synth: object) -> tuple[float, float, float] | None:
         raise ValueError(f"synth step must be positive, got {step}")
     if stop < start:
         raise ValueError(f"synth must have start <= stop, got start={start}, stop={stop}")
+    check_limit((stop - start) / step + 1, "synth", "views per object", *VIEW_LIMIT)
     return start, stop, step
 
 
@@ -114,8 +123,11 @@ def check_seeds(seeds: object) -> list[torch.Tensor]:
     return objects
 
 
-def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[float]]:
-    """Per object its seed views' angles (degrees): one shared list, or one list per object."""
+def check_angles(
+    seed_angles: object, objects: list[torch.Tensor], synthesis: bool = False
+) -> list[list[float]]:
+    """Per object its seed views' angles (degrees): one shared list, or one list per object;
+    with ``synthesis``, consecutive ones a seed pair can synthesize from (:func:`seed_steps`)."""
     if isinstance(seed_angles, torch.Tensor):
         seed_angles = seed_angles.detach().tolist()
     if not isinstance(seed_angles, Sequence) or isinstance(seed_angles, str) or not seed_angles:
@@ -136,6 +148,8 @@ def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[
         values = [check_number(a, what) for a in angles]
         if not all(math.isfinite(a) for a in values):
             raise ValueError(f"{what} must hold finite angles, got {angles!r}")
+        if synthesis:
+            seed_steps(values, what)
         out.append(values)
     return out
 
@@ -150,8 +164,16 @@ def check_labels(labels: object, n_objects: int) -> list[int]:
     return [check_int(v, f"labels[{i}]") for i, v in enumerate(labels)]
 
 
-def seed_steps(angles: list[float]) -> list[float]:
-    return [b - a for a, b in itertools.pairwise(angles)]
+def seed_steps(angles: list[float], what: str = "seed_angles") -> list[float]:
+    """The angles between consecutive seed views, each one a pair can synthesize from."""
+    steps = [b - a for a, b in itertools.pairwise(angles)]
+    for i, step in enumerate(steps):
+        if math.remainder(step, 180.0) == 0:  # sin(step) = 0: the pair sees no depth
+            raise ValueError(
+                f"{what} must put consecutive seed views apart by an angle that is not a multiple of 180 "
+                f"degrees to synthesize from them, got {angles[i]} and {angles[i + 1]} (seeds {i} and {i + 1})"
+            )
+    return steps
 
 
 def block_source(blocks: object) -> Callable[[], Iterable[object]]:
