@@ -24,6 +24,7 @@ from torch_eigview.io.images import read_image
 from torch_eigview.method import FewViewEigenspace
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.scale.view_cache import ViewCache
+from torch_eigview.sklearn import FewViewRecognizerClassifier
 from torch_eigview.warp.augmentation import RandomTurntableRotation
 
 from tests.adversarial import files
@@ -89,7 +90,24 @@ def _multipage(tmp: Path) -> Path:
     return path
 
 
+def _classifier_gap(tmp: Path) -> object:
+    rows = _x(4, 64).numpy()
+    return FewViewRecognizerClassifier(image_shape=(1, 8, 8)).fit(
+        rows, [0, 0, 1, 1], angles=[0.0, 200.0, 0.0, 10.0]
+    )
+
+
 METHOD = [
+    Case(
+        "seeds-span-a-half-turn",
+        lambda t: FewViewEigenspace(3).fit(_x(1, 3, 1, 8, 8), [0.0, 100.0, 200.0]),
+        r"seed_angles must span less than 180 degrees.*\[0\.0, 100\.0, 200\.0\]",
+    ),
+    Case(
+        "classifier-angles-gap",
+        _classifier_gap,
+        r"angles must put consecutive rows of a label less than 180 degrees apart.*0\.0 and 200\.0 for label 0",
+    ),
     Case(
         "seeds-nan",
         lambda t: FewViewEigenspace(3).fit(_with(SEEDS, (0, 0, 0, 1, 1), math.nan), [0.0, 10.0]),

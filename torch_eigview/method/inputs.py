@@ -165,7 +165,8 @@ def check_labels(labels: object, n_objects: int) -> list[int]:
 
 
 def seed_steps(angles: list[float], what: str = "seed_angles") -> list[float]:
-    """The angles between consecutive seed views, each one a pair can synthesize from."""
+    """The angles between consecutive seed views, each one a pair can synthesize from, over
+    less than a half turn (``synthesize_views``'s seeds)."""
     steps = [b - a for a, b in itertools.pairwise(angles)]
     for i, step in enumerate(steps):
         if math.remainder(step, 180.0) == 0:  # sin(step) = 0: the pair sees no depth
@@ -173,6 +174,11 @@ def seed_steps(angles: list[float], what: str = "seed_angles") -> list[float]:
                 f"{what} must put consecutive seed views apart by an angle that is not a multiple of 180 "
                 f"degrees to synthesize from them, got {angles[i]} and {angles[i + 1]} (seeds {i} and {i + 1})"
             )
+    if abs(sum(steps)) >= 180:
+        raise ValueError(
+            f"{what} must span less than 180 degrees to synthesize from (the limit of "
+            f"synthesize_views), got {angles}"
+        )
     return steps
 
 
