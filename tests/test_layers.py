@@ -27,7 +27,18 @@ ALLOWED: dict[str, set[str]] = {
     "datasets": {"base", "geometry", "io"},
     "method": {"base", "geometry", "warp", "synthesis", "nn", "decomposition"},
     "sklearn": {"base", "geometry", "warp", "synthesis", "nn", "decomposition", "method"},
-    "apps": {"base", "geometry", "warp", "synthesis", "nn", "decomposition", "scale", "io", "datasets", "method"},
+    "apps": {
+        "base",
+        "geometry",
+        "warp",
+        "synthesis",
+        "nn",
+        "decomposition",
+        "scale",
+        "io",
+        "datasets",
+        "method",
+    },
     "root": set(),  # the package's __init__ and __main__ import lazily or the command only
 }
 

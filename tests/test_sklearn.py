@@ -1,5 +1,6 @@
-"""Tests for the scikit-learn estimators: scikit-learn's own checks, agreement with its PCA
-and KernelPCA, dtypes, Pipeline and GridSearchCV, and the whole method on rendered objects."""
+"""Tests for the scikit-learn estimators: agreement with scikit-learn's PCA and KernelPCA,
+dtypes, Pipeline and GridSearchCV, and the whole method on rendered objects (scikit-learn's
+own checks are in test_sklearn_checks.py)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,6 @@ from sklearn.exceptions import NotFittedError
 from sklearn.model_selection import GridSearchCV
 from sklearn.neighbors import KNeighborsClassifier
 from sklearn.pipeline import Pipeline
-from sklearn.utils.estimator_checks import parametrize_with_checks
 from sklearn.utils.validation import check_is_fitted
 
 from torch_eigview.datasets import OrthographicCamera, make_object, render_views
@@ -29,20 +29,6 @@ from torch_eigview.sklearn import (
     EigenspacePCA,
     FewViewRecognizerClassifier,
 )
-
-ESTIMATORS = [
-    EigenspacePCA(),
-    EigenspaceKernelPCA(),
-    # The checks feed generic (n_samples, n_features) data, not images with seed views:
-    # the classifier is checked without synthesis (its gallery: the rows themselves);
-    # test_classifier_synthesizes covers the synthesis.
-    FewViewRecognizerClassifier(synth=None),
-]
-
-
-@parametrize_with_checks(ESTIMATORS)
-def test_scikit_learn_checks(estimator: object, check: object) -> None:
-    check(estimator)  # type: ignore[operator]
 
 
 def _data(dtype: type = np.float64, n: int = 30, d: int = 8) -> np.ndarray:
@@ -124,7 +110,7 @@ def test_parameters_are_checked_by_fit() -> None:
         (EigenspacePCA(unit_norm="yes"), TypeError, "unit_norm"),  # type: ignore[arg-type]
         (EigenspacePCA(image_shape=(1, 2, 3)), ValueError, "image_shape="),
         (EigenspaceKernelPCA(kernel="sigmoid"), ValueError, "kernel="),
-        (FewViewRecognizerClassifier(), ValueError, "image_shape=.C, H, W. is needed"),
+        (FewViewRecognizerClassifier(image_shape=(2, 2, 3)), ValueError, "image_shape="),
         (FewViewRecognizerClassifier(synth=None, alpha="ten"), TypeError, "alpha"),  # type: ignore[arg-type]
     ):
         with pytest.raises(error, match=match):

@@ -226,6 +226,11 @@ def check_positive(value: object, name: str, *, allow_zero: bool = False) -> flo
     return number
 
 
+#: Views synthesized per object (every 0.1 degree over the whole turn by default): the
+#: environment variable that raises the limit, and the limit.
+VIEW_LIMIT = ("EIGVIEW_MAX_VIEWS", 3600)
+
+
 def limit(env: str, default: int) -> int:
     """The limit named by the environment variable ``env`` (a positive int), else ``default``.
 

@@ -64,7 +64,8 @@ def test_image_side_bounded(command: str, capsys: pytest.CaptureFixture[str]) ->
     err = _err([command, "--size", "100000"], capsys)
     assert "--size asks for 100000 pixels per image side, more than the limit of 512" in err
     assert "EIGVIEW_MAX_IMAGE_SIDE" in err
-    assert "--size=0 must be >= 1" in _err([command, "--size", "0"], capsys)
+    assert "--size=0 must be >= 2" in _err([command, "--size", "0"], capsys)
+    assert "--size=1 must be >= 2" in _err([command, "--size", "1"], capsys)  # the flow takes gradients
 
 
 def test_demo_alpha_named(capsys: pytest.CaptureFixture[str]) -> None:

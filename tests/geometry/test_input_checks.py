@@ -21,11 +21,26 @@ from torch_eigview.warp.novel_view import NovelViewWarp
 from tests.helpers import rand
 
 
-@pytest.mark.parametrize("shape", [(1, 1, 16), (1, 0, 16), (1, 8, 1)], ids=["1xW", "empty", "Hx1"])
+@pytest.mark.parametrize("shape", [(1, 0, 16), (1, 8, 1), (1, 1, 1)], ids=["empty", "Hx1", "1x1"])
 def test_too_small_views(shape: tuple[int, ...]) -> None:
     v = torch.zeros(shape)
     with pytest.raises(ValueError, match=r"view1 must be at least 2x2 pixels"):
         estimate_correspondence(v, v)
+
+
+def test_one_row_views_match_along_their_row() -> None:
+    """A 1-pixel-high pair is matched as its row twice over: the same as a 2-row pair's top row."""
+    row = torch.exp(-0.5 * ((torch.arange(24.0, dtype=torch.float64) - 10.0) / 2.0) ** 2).view(1, 1, 24)
+    moved = torch.roll(row, 2, dims=-1)
+    corr = estimate_correspondence(row, moved)
+    two = estimate_correspondence(row.expand(1, 2, 24), moved.expand(1, 2, 24))
+    assert corr.shape == (1, 1, 24)
+    for name in ("disparity_12", "disparity_21", "valid_12", "valid_21", "vertical_12", "vertical_21"):
+        assert torch.equal(getattr(corr, name), getattr(two, name)[:, :1]), name
+    assert (corr.disparity_12[0, 0, 8:13] - 2.0).abs().max() < 0.5  # the bump moved 2 pixels right
+    # ILK's per-pixel 2x2 system is singular without a vertical gradient: refused, not a zero flow.
+    with pytest.raises(ValueError, match=r"one pixel high \(H=1, W=24\): method='ilk' needs 2 rows"):
+        estimate_correspondence(row, moved, method="ilk")
 
 
 def test_batch_zero_gives_an_empty_correspondence() -> None:

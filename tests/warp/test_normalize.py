@@ -190,3 +190,16 @@ def test_resolve_extent_auto_follows_the_seeds_fill() -> None:
     assert not resolve_extent("auto", mixed)
     assert resolve_extent(True, margin) and not resolve_extent(False, filled)
     assert 0.5 < FILLED_FRAME < 1.0
+
+
+def test_one_pixel_high_or_wide_images_fill_along_their_long_side() -> None:
+    """A side one pixel long has no extent: the other sets the scale (it used to be 0, giving NaN)."""
+    row = torch.zeros(1, 1, 1, 8, dtype=torch.float64)
+    row[..., 2:5] = torch.tensor([0.5, 1.0, 0.7], dtype=torch.float64)
+    out = normalize_extent(row, row[:, 0] > 0.1)
+    assert torch.isfinite(out).all()
+    assert out[0, 0, 0, 0] == 0.5 and out[0, 0, 0, -1] == 0.7  # the box spans the frame
+    column = normalize_extent(row.transpose(-1, -2), row.transpose(-1, -2)[:, 0] > 0.1)
+    torch.testing.assert_close(column, out.transpose(-1, -2))
+    pixel = torch.full((1, 1, 1, 1), 0.5, dtype=torch.float64)
+    assert torch.equal(normalize_extent(pixel, pixel[:, 0] > 0.1), pixel)

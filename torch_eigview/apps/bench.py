@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -37,6 +38,8 @@ from torch_eigview.scale.thread_policy import threads
 
 __all__ = ["main", "smooth_views"]
 
+# Relative to the working folder, as the README runs it from the checkout.
+_DEFAULT_ROOT = "../shared/data/coil-20-proc"
 _SECTIONS = ("warp", "eigen", "gemm", "scaling", "coil100", "stages", "threads", "cuda")
 _WARP_SLOW_MAX = 128  # largest side for the sparse G·C and skimage warp comparisons
 
@@ -190,7 +193,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--png", default=None, metavar="FILE", help="plot of the scaling here")
     p.add_argument("--sections", nargs="+", choices=_SECTIONS, default=list(_SECTIONS))
     p.add_argument(
-        "--root", default="../shared/data/coil-20-proc", help="COIL-20 folder for the eigen section"
+        "--root",
+        default=None,
+        help=f"COIL-20 folder for the eigen section (default {_DEFAULT_ROOT}, a synthetic stand-in where absent)",
     )
     p.add_argument("--threads", type=threads_arg, default=None, metavar="N", help="torch threads (default 1)")
     p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
@@ -342,8 +347,12 @@ def _main(args: argparse.Namespace) -> int:
         return 0
     try:
         check_outputs([("--json", args.json), ("--png", args.png)])  # before the timings, not after
+        if args.root is not None and not os.path.isdir(args.root):
+            # The stand-in is for the default folder only: a folder the user names must exist.
+            raise ValueError(f"--root={args.root!r} is not an existing folder of COIL-20 images")
     except ValueError as exc:
         parser.exit(2, f"eigview bench: error: {exc}\n")
+    root = args.root if args.root is not None else _DEFAULT_ROOT
     quick = args.quick
     reps = 2 if quick else 5
     results: dict[str, Any] = {"quick": quick, "torch": torch.__version__, "threads": torch.get_num_threads()}
@@ -355,12 +364,12 @@ def _main(args: argparse.Namespace) -> int:
     if "warp" in args.sections:
         _section_warp(results, quick, reps)
     if "eigen" in args.sections:
-        _section_eigen(results, args.root, quick, reps)
+        _section_eigen(results, root, quick, reps)
     if "scaling" in args.sections:
         _section_scaling(results, quick)
     if "coil100" in args.sections:
         _section_coil100(results, quick)
-    run_sections(args.sections, results, args.root, quick)
+    run_sections(args.sections, results, root, quick)
     try:
         if args.json:
             write_json(args.json, results)

@@ -55,7 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--alpha", type=finite_arg("--alpha"), default=10.0, help="angle between the two seed views, degrees"
     )
     demo.add_argument(
-        "--size", type=bounded_int_arg("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+        "--size",
+        type=bounded_int_arg("--size", 2, SIZE_LIMIT),
+        default=64,
+        help="image side in pixels (>= 2)",
     )
     demo.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     demo.add_argument("--png", default="eigview_demo.png", help="figure to write ('' for none)")
@@ -75,7 +78,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--views", type=int, nargs="+", choices=(2, 3), default=[2, 3], help="seed views N")
     synth.add_argument(
-        "--size", type=bounded_int_arg("--size", 1, SIZE_LIMIT), default=64, help="image side in pixels"
+        "--size",
+        type=bounded_int_arg("--size", 2, SIZE_LIMIT),
+        default=64,
+        help="image side in pixels (>= 2)",
     )
     synth.add_argument("--correspondences", choices=("flow", "exact"), default="flow")
     synth.add_argument("--shapes", default=None, help="comma-separated objects (default: all five)")

@@ -218,8 +218,14 @@ def run_coil(args: argparse.Namespace) -> int:
     from torch_eigview.datasets.coil import CoilFolder, find_coil_root
     from torch_eigview.io.checkpoint import save_recognizer
 
-    check_outputs([("--json", args.json), ("--save", args.save)], inputs=[("--root", args.root)])
+    outputs = [("--json", args.json), ("--save", args.save)]
+    check_outputs(outputs, inputs=[("--root", args.root)])
     folder = CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit, device=_device(args.device))
+    # An output inside the folder must not replace one of the images the run reads.
+    check_outputs(
+        outputs,
+        inputs=[("an image of --root", folder.path(o, p)) for o in folder.objects for p in folder.poses(o)],
+    )
     _check_circle_flags(args)
     experiment = CoilExperiment(
         alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,

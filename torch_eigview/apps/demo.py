@@ -79,7 +79,17 @@ def recognition_experiment(
     names = progress(scene.shapes) if progress else scene.shapes
     x, labels, poses = stack_gallery(_gallery_blocks(scene, names, alpha, n_views, synth, correspondences))
     t_gallery = time.perf_counter()
-    recognizer = build_recognizer(x, labels, poses, components, label_names=list(scene.shapes))
+    try:
+        recognizer = build_recognizer(x, labels, poses, components, label_names=list(scene.shapes))
+    except ValueError as exc:
+        if "exceeds the rank" not in str(exc):
+            raise
+        # The cause is the scene the command line chose, not an argument of the eigenspace.
+        raise ValueError(
+            f"the {len(scene.shapes)} object(s) rendered at {tuple(x.shape[-2:])} pixels give too few distinct "
+            f"views for {components} eigenspace components ({exc}): render larger views (--size) or more "
+            f"objects (--shapes)"
+        ) from exc
     test_angles = angle_range(test[0], test[1], 1.0, name="test")
     truth = torch.tensor(test_angles, dtype=x.dtype)
     result = score(

@@ -36,7 +36,14 @@ import torch
 
 from torch_eigview.apps.circle import CircleLayout, circle_layout, synthesize_circle
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
-from torch_eigview.check import check_alpha, check_int, check_limit, check_n_components, check_number
+from torch_eigview.check import (
+    VIEW_LIMIT,
+    check_alpha,
+    check_int,
+    check_limit,
+    check_n_components,
+    check_number,
+)
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
@@ -45,8 +52,6 @@ from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions, 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
 METHODS = ("nvs", "sparse", "dense")
-# Views synthesized per object: every 0.1 degree over the whole turn by default.
-VIEW_LIMIT = ("EIGVIEW_MAX_VIEWS", 3600)
 
 
 def _check_angles(values: object, name: str, size: int, layout: str) -> None:

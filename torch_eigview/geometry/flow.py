@@ -55,11 +55,11 @@ def estimate_correspondence(
 
     Returns:
         A :class:`Correspondence` of shape (B, H, W) on the device and dtype of ``view1``;
-        B = 0 gives an empty one.
+        B = 0 gives an empty one. Views one pixel high are matched along their one row.
 
     Raises:
         TypeError: a view is not a float tensor, or ``method`` not a str.
-        ValueError: shapes that differ or are smaller than 2x2 pixels, non-finite views,
+        ValueError: shapes that differ, are empty or narrower than 2 pixels, non-finite views,
             an unknown ``method``, a ``threshold`` that is not a finite number > 0, or a
             flow that diverges (views far outside image intensities).
     """
@@ -73,14 +73,36 @@ def estimate_correspondence(
     threshold = check_positive(threshold, "threshold")
     if v1.shape[-3] < 1:
         raise ValueError(f"view1 must have at least one channel, got shape {tuple(v1.shape)}")
-    if v1.shape[-2] < 2 or v1.shape[-1] < 2:
+    if v1.shape[-2] < 1 or v1.shape[-1] < 2:
         raise ValueError(
-            f"view1 must be at least 2x2 pixels (the flow takes image gradients), got H={v1.shape[-2]}, "
-            f"W={v1.shape[-1]}"
+            f"view1 must be at least 2x2 pixels, or one row of 2 pixels or more (the flow takes image "
+            f"gradients), got H={v1.shape[-2]}, W={v1.shape[-1]}"
         )
+    if v1.shape[-2] == 1 and method != "rows":
+        if method == "ilk":
+            # Its per-pixel 2x2 system is singular without a vertical gradient: the flow would be 0.
+            raise ValueError(
+                f"view1 is one pixel high (H=1, W={v1.shape[-1]}): method='ilk' needs 2 rows or more, "
+                f"use method='tvl1'"
+            )
+        return _one_row(v1, v2, method, threshold, flow_kwargs)
     if method == "rows":
         return match_rows(v1, v2, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
     return _skimage_flow(v1, v2, method, threshold, flow_kwargs)
+
+
+def _one_row(
+    v1: torch.Tensor, v2: torch.Tensor, method: str, threshold: float, flow_kwargs: dict[str, object]
+) -> Correspondence:
+    """The correspondence of 1-pixel-high views: each matched as two identical rows.
+
+    A flow takes vertical gradients, which one row does not have; two copies of it have
+    zero vertical gradient, so the flow moves along the row only and both rows agree.
+    """
+    two1, two2 = (v.expand(*v.shape[:-2], 2, v.shape[-1]) for v in (v1, v2))
+    corr = estimate_correspondence(two1, two2, method=method, threshold=threshold, **flow_kwargs)
+    fields = {f.name: getattr(corr, f.name) for f in dataclasses.fields(corr)}
+    return dataclasses.replace(corr, **{k: v[..., :1, :] for k, v in fields.items() if v is not None})
 
 
 def _skimage_flow(

@@ -253,6 +253,11 @@ def _check_views(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tens
         raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
     check_finite(v1, "view1")
     check_finite(v2, "view2")
+    if min(v1.shape[-2:]) < 4:
+        raise ValueError(
+            f"view1 must be at least 4x4 pixels (the line model is searched at quarter resolution), "
+            f"got H={v1.shape[-2]}, W={v1.shape[-1]}"
+        )
     return (v1[None], v2[None]) if v1.ndim == 3 else (v1, v2)
 
 

@@ -61,7 +61,8 @@ class FewViewEigenspace:
             None for every component above rounding (:data:`ALL_COMPONENTS`).
         synth: (start, stop, step) of the synthesized angles in degrees, relative to each
             object's first seed view, for two seeds (see ``synth_follows_seeds``); None
-            fits the seed views alone (the ``sparse`` baseline of the experiments).
+            fits the seed views alone (the ``sparse`` baseline of the experiments). At
+            most 3600 views per object (environment variable ``EIGVIEW_MAX_VIEWS``).
         options: :class:`~torch_eigview.synthesis.SynthesisOptions` (flow, elevation,
             extent, blend, silhouette, …); None for the defaults.
         unit_norm: scale every view to unit L2 norm before the eigenspace and in the layer.
@@ -191,7 +192,7 @@ class FewViewEigenspace:
         params = self._params()
         reject = self._reject_params(params.synth)
         objects = check_seeds(seeds)
-        angles = check_angles(seed_angles, objects)
+        angles = check_angles(seed_angles, objects, synthesis=params.synth is not None)
         names = check_labels(labels, len(objects))
         seed_masks = check_seed_masks(masks, objects)
         if params.synth is not None:

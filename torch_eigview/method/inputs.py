@@ -16,7 +16,15 @@ from dataclasses import dataclass
 import torch
 from torch.utils.data import DataLoader, RandomSampler
 
-from torch_eigview.check import check_float_tensor, check_int, check_n_components, check_ndim, check_number
+from torch_eigview.check import (
+    VIEW_LIMIT,
+    check_float_tensor,
+    check_int,
+    check_limit,
+    check_n_components,
+    check_ndim,
+    check_number,
+)
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
 from torch_eigview.warp.normalize import box_fill, foreground_mask, seed_foreground
@@ -92,6 +100,7 @@ def check_synth(synth: object, name: str = "synth") -> tuple[float, float, float
         raise ValueError(f"{name} step must be positive, got {step}")
     if stop < start:
         raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
+    check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
     return start, stop, step
 
 
@@ -161,8 +170,11 @@ def check_seed_masks(masks: object, objects: list[torch.Tensor]) -> list[torch.T
     return out
 
 
-def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[float]]:
-    """Per object its seed views' angles (degrees): one shared list, or one list per object."""
+def check_angles(
+    seed_angles: object, objects: list[torch.Tensor], synthesis: bool = False
+) -> list[list[float]]:
+    """Per object its seed views' angles (degrees): one shared list, or one list per object;
+    with ``synthesis``, consecutive ones a seed pair can synthesize from (:func:`seed_steps`)."""
     if isinstance(seed_angles, torch.Tensor):
         seed_angles = seed_angles.detach().tolist()
     if not isinstance(seed_angles, Sequence) or isinstance(seed_angles, str) or not seed_angles:
@@ -183,6 +195,8 @@ def check_angles(seed_angles: object, objects: list[torch.Tensor]) -> list[list[
         values = [check_number(a, what) for a in angles]
         if not all(math.isfinite(a) for a in values):
             raise ValueError(f"{what} must hold finite angles, got {angles!r}")
+        if synthesis:
+            seed_steps(values, what)
         out.append(values)
     return out
 
@@ -226,8 +240,22 @@ def warn_unnormalized_seeds(objects: list[torch.Tensor], options: SynthesisOptio
         )
 
 
-def seed_steps(angles: list[float]) -> list[float]:
-    return [b - a for a, b in itertools.pairwise(angles)]
+def seed_steps(angles: list[float], what: str = "seed_angles") -> list[float]:
+    """The angles between consecutive seed views, each one a pair can synthesize from, over
+    less than a half turn (``synthesize_views``'s seeds)."""
+    steps = [b - a for a, b in itertools.pairwise(angles)]
+    for i, step in enumerate(steps):
+        if math.remainder(step, 180.0) == 0:  # sin(step) = 0: the pair sees no depth
+            raise ValueError(
+                f"{what} must put consecutive seed views apart by an angle that is not a multiple of 180 "
+                f"degrees to synthesize from them, got {angles[i]} and {angles[i + 1]} (seeds {i} and {i + 1})"
+            )
+    if abs(sum(steps)) >= 180:
+        raise ValueError(
+            f"{what} must span less than 180 degrees to synthesize from (the limit of "
+            f"synthesize_views), got {angles}"
+        )
+    return steps
 
 
 def block_source(blocks: object) -> Callable[[], Iterable[object]]:

@@ -86,6 +86,10 @@ class EigenProjection(FrozenProjection):
         super().__init__(unit_norm)
         if is_size(n_features):
             n, k = check_sizes([(n_features, "n_features"), (n_components, "n_components")], eigenvalues)
+            if k > n:
+                raise ValueError(
+                    f"n_components={k} must be <= n_features={n}: N values span at most N orthonormal components"
+                )
             mean, components = torch.zeros(n), torch.zeros(k, n)
         else:
             mean = check_float_tensor(n_features, "mean")

@@ -148,7 +148,9 @@ def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
     x0, x1 = _first_last(masks.any(dim=-2))
     box_w = (x1 - x0).clamp_min(1).to(dtype)
     box_h = (y1 - y0).clamp_min(1).to(dtype)
-    scale = torch.minimum((w - 1) / box_w, (h - 1) / box_h).view(p, 1, 1)
+    # A side one pixel long has no extent to fill (its scale would be 0): the other side sets it.
+    fills = [(n - 1) / box for n, box in ((w, box_w), (h, box_h)) if n > 1] or [torch.ones_like(box_w)]
+    scale = (fills[0] if len(fills) == 1 else torch.minimum(*fills)).view(p, 1, 1)
     cx = ((x0 + x1).to(dtype) / 2).view(p, 1, 1)
     cy = ((y0 + y1).to(dtype) / 2).view(p, 1, 1)
     u = torch.arange(w, dtype=dtype, device=images.device).view(1, 1, w)
