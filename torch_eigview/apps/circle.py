@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.check import check_int
+from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.angles import angle_range
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
 
-__all__ = ["CircleLayout", "circle_layout", "synthesize_circle"]
+__all__ = ["CircleLayout", "check_overlap", "circle_layout", "default_overlap", "synthesize_circle"]
 
 _TOL = 1e-6
 
@@ -121,26 +121,70 @@ def circle_layout(
     return CircleLayout(seed_poses, alpha, real, tests)
 
 
+def check_overlap(m: int, overlap: object, name: str = "overlap") -> float:
+    """``overlap`` as a float, or a ValueError naming ``name``: it must lie in [0, α/2]
+    (α = 360/M) and, above 0, keep α + overlap below 90 degrees (Eq. 7 holds within a
+    quarter turn of a pair's first seed)."""
+    value = check_number(overlap, name)
+    alpha = 360.0 / m
+    if not (0 <= value <= alpha / 2 and (value == 0 or alpha + value < 90)):
+        raise ValueError(
+            f"{name}={value:g} must be in [0, alpha/2 = {alpha / 2:g}] degrees and, above 0, below "
+            f"90 - alpha = {90 - alpha:g} (M={m}: Eq. 7 holds within a quarter turn of a pair's first seed)"
+        )
+    return value
+
+
+def default_overlap(m: int, step: float) -> float:
+    """The extrapolation past each seed that ``eigview coil --seeds M`` uses: the largest
+    multiple of ``step`` up to α/3 (α = 360/M) that keeps α + overlap below 90 degrees
+    (none for M <= 4).
+
+    α/3 was chosen on COIL-20 (α/6 and α/3 tried at M = 6; α/2 is beyond the quarter
+    turn there).
+
+    Example:
+        >>> [default_overlap(m, 1.0) for m in (4, 6, 8, 12)]
+        [0.0, 20.0, 15.0, 10.0]
+    """
+    alpha = 360.0 / m
+    limit = min(alpha / 3, 90.0 - alpha - step)
+    return max(0.0, math.floor(limit / step + _TOL) * step)
+
+
 def synthesize_circle(
-    seeds: torch.Tensor, step: float, options: SynthesisOptions | None = None
+    seeds: torch.Tensor, step: float, options: SynthesisOptions | None = None, overlap: float = 0.0
 ) -> SynthesizedViews:
     """One object's views all round from its M evenly spaced seed views.
 
-    Pair k (seeds k and k + 1 mod M) synthesizes θ = 0, step, … < α = 360/M from seed k.
+    Pair k (seeds k and k + 1 mod M) synthesizes θ = 0, step, … < α = 360/M from seed k;
+    with an ``overlap`` it also extrapolates ``overlap`` degrees past each of its seeds
+    (θ = −overlap … < 0 and α < θ <= α + overlap, on the grid of ``step``), so near every
+    seed the gallery holds the views of both pairs that meet there.
 
     Args:
         seeds: (M, C, H, W) seed views at 0, α, …, (M − 1)·α from the first, M >= 3.
         step: angle between synthesized views in degrees.
         options: the synthesis options.
+        overlap: degrees each pair extrapolates past its seeds, in [0, α/2] and below
+            90 − α (Eq. 7 holds within a quarter turn of a pair's first seed).
 
     Returns:
         :class:`~torch_eigview.synthesis.SynthesizedViews`: (M·T, C, H, W) views, their
         angles from the first seed in [0, 360), one elevation per pair, the times and
         each view's pair k.
+
+    Raises:
+        ValueError: ``overlap`` outside [0, α/2] or not below 90 − α.
     """
     m = seeds.shape[0]
     alpha = 360.0 / m
+    overlap = check_overlap(m, overlap)
     thetas = [t for t in angle_range(0.0, alpha, step, "circle step") if t < alpha - _TOL]
+    n_out = math.floor(overlap / step + _TOL)
+    thetas = (
+        [-step * i for i in range(n_out, 0, -1)] + thetas + [alpha + step * i for i in range(n_out + 1)][1:]
+    )
     views, elevations, seconds = [], [], {"correspondence": 0.0, "synthesis": 0.0}
     for k in range(m):
         out = synthesize_views(seeds[[k, (k + 1) % m]], alpha, thetas, options)
@@ -148,6 +192,6 @@ def synthesize_circle(
         elevations += out.elevations
         for key, value in out.seconds.items():
             seconds[key] += value
-    angles = torch.tensor([k * alpha + t for k in range(m) for t in thetas], dtype=torch.float64)
+    angles = torch.tensor([(k * alpha + t) % 360 for k in range(m) for t in thetas], dtype=torch.float64)
     pairs = torch.arange(m).repeat_interleave(len(thetas))
     return SynthesizedViews(torch.cat(views), angles, elevations, seconds, pairs)
