@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from torch_eigview.apps.circle import check_overlap, circle_layout, default_overlap, synthesize_circle
+from torch_eigview.apps.circle import circle_layout, synthesize_circle
 from torch_eigview.apps.cli import main
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
@@ -179,11 +179,3 @@ def test_synthesize_circle_overlap() -> None:
 def test_synthesize_circle_overlap_errors(m: int, overlap: float) -> None:
     with pytest.raises(ValueError, match="overlap"):
         synthesize_circle(torch.rand(m, 1, 8, 8), 15.0, SynthesisOptions(elevation=0.0), overlap=overlap)
-
-
-def test_default_overlap_stays_within_a_quarter_turn() -> None:
-    for m in range(3, 25):
-        for step in (1.0, 5.0):
-            overlap = default_overlap(m, step)
-            assert check_overlap(m, overlap) == overlap
-            assert overlap <= 120.0 / m and overlap % step == 0

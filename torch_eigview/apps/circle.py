@@ -3,7 +3,11 @@
 M seed views evenly spaced over 360° from ``center`` (α = 360°/M); every consecutive pair,
 the last seed with the first included, synthesizes its own sector [0, α) from its first
 seed, so the gallery goes once round the turntable and every seed's own view comes from
-the pair it starts (:func:`torch_eigview.synthesis.pair_of`'s rule). The baselines are the
+the pair it starts (:func:`torch_eigview.synthesis.pair_of`'s rule). With an ``overlap``
+each pair also extrapolates past both of its seeds, so near every seed the gallery holds
+the views of both pairs that meet there, each warping that seed by its own correspondence
+(COIL-20, every pose tested: M = 6 from 89.3 to 91.8 % with 20 degrees, M = 8 unchanged
+at 15 degrees, for 1.67 times the gallery; so it is off by default). The baselines are the
 M seed views alone (``sparse``) and real views every S degrees (``dense``). The test views
 are every available pose that holds no real gallery view.
 """
@@ -20,7 +24,7 @@ from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.angles import angle_range
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
 
-__all__ = ["CircleLayout", "check_overlap", "circle_layout", "default_overlap", "synthesize_circle"]
+__all__ = ["CircleLayout", "check_overlap", "circle_layout", "synthesize_circle"]
 
 _TOL = 1e-6
 
@@ -133,23 +137,6 @@ def check_overlap(m: int, overlap: object, name: str = "overlap") -> float:
             f"90 - alpha = {90 - alpha:g} (M={m}: Eq. 7 holds within a quarter turn of a pair's first seed)"
         )
     return value
-
-
-def default_overlap(m: int, step: float) -> float:
-    """The extrapolation past each seed that ``eigview coil --seeds M`` uses: the largest
-    multiple of ``step`` up to α/3 (α = 360/M) that keeps α + overlap below 90 degrees
-    (none for M <= 4).
-
-    α/3 was chosen on COIL-20 (α/6 and α/3 tried at M = 6; α/2 is beyond the quarter
-    turn there).
-
-    Example:
-        >>> [default_overlap(m, 1.0) for m in (4, 6, 8, 12)]
-        [0.0, 20.0, 15.0, 10.0]
-    """
-    alpha = 360.0 / m
-    limit = min(alpha / 3, 90.0 - alpha - step)
-    return max(0.0, math.floor(limit / step + _TOL) * step)
 
 
 def synthesize_circle(

@@ -77,8 +77,7 @@ def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         type=finite_arg("--overlap"),
         default=None,
         metavar="DEG",
-        help="with --seeds: degrees each seed pair extrapolates past its seeds "
-        "(default the largest whole step up to 120/M that stays within 90 - 360/M)",
+        help="with --seeds: degrees each seed pair extrapolates past its seeds, below 90 - 360/M (default 0)",
     )
     _add_method_arguments(coil)
 
@@ -222,7 +221,7 @@ def run_coil(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         dense_step=args.dense_step,
         interpolate_pose=args.pose == "interpolate",
-        overlap=args.overlap,
+        overlap=0.0 if args.overlap is None else args.overlap,
     )
     if args.seeds is not None:
         experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))

@@ -38,7 +38,6 @@ from torch_eigview.apps.circle import (
     CircleLayout,
     check_overlap,
     circle_layout,
-    default_overlap,
     synthesize_circle,
 )
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
@@ -131,8 +130,7 @@ class CoilExperiment:
             (:meth:`~torch_eigview.nn.recognition.NearestNeighborRecognizer.interpolate_poses`),
             not the nearest view's pose.
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
-            (:func:`~torch_eigview.apps.circle.synthesize_circle`); None:
-            :func:`~torch_eigview.apps.circle.default_overlap`.
+            (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
     """
 
     alpha: float = 5.0
@@ -151,7 +149,7 @@ class CoilExperiment:
     seeds: int | None = None
     dense_step: float | None = None
     interpolate_pose: bool = False
-    overlap: float | None = None
+    overlap: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kernel is not None:
@@ -188,7 +186,7 @@ class CoilExperiment:
                 raise ValueError(
                     f"seeds={self.seeds} places its own seed views: it cannot take views={self.views}"
                 )
-        if self.overlap is not None and self.seeds is None:
+        if check_number(self.overlap, "overlap") != 0 and self.seeds is None:
             raise ValueError(f"overlap={self.overlap} extends the full circle's sectors: it needs seeds")
         if self.dense_step is not None and (self.seeds is None or self.method != "dense"):
             raise ValueError(
@@ -240,7 +238,7 @@ class CoilExperiment:
         objs = folder.objects if objects is None else objects
         common = set.intersection(*(set(folder.poses(obj)) for obj in objs))
         layout = circle_layout(sorted(common), self._center, self.seeds, self.method, self.dense_step, names)
-        if self.overlap is not None:
+        if self.overlap != 0:
             check_overlap(self.seeds, self.overlap, "--overlap" if names[0] == "--seeds" else "overlap")
         return layout
 
@@ -271,12 +269,7 @@ class CoilExperiment:
             warnings.simplefilter("always", ElevationFallbackWarning)
             try:
                 if layout is not None:
-                    overlap = (
-                        default_overlap(len(layout.seeds), self.synth[2])
-                        if self.overlap is None
-                        else self.overlap
-                    )
-                    out = synthesize_circle(seeds, self.synth[2], self.synthesis, overlap)
+                    out = synthesize_circle(seeds, self.synth[2], self.synthesis, self.overlap)
                 else:
                     out = synthesize_views(seeds, self.alpha, self.synth_angles(), self.synthesis)
             except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
