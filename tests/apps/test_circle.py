@@ -100,6 +100,7 @@ def test_circle_run(folder: CoilFolder, method: str, n_gallery: int) -> None:
         (dict(seeds=4, views=3), "seeds=4 places its own seed views: it cannot take views=3"),
         (dict(dense_step=10.0, method="dense"), "dense_step=10.0 is the full circle's dense baseline"),
         (dict(seeds=4, dense_step=10.0), "it needs seeds and method 'dense'"),
+        (dict(overlap=5.0), "overlap=5.0 extends the full circle's sectors: it needs seeds"),
     ],
 )
 def test_config_errors(kwargs: dict[str, object], match: str) -> None:
@@ -179,3 +180,10 @@ def test_synthesize_circle_overlap() -> None:
 def test_synthesize_circle_overlap_errors(m: int, overlap: float) -> None:
     with pytest.raises(ValueError, match="overlap"):
         synthesize_circle(torch.rand(m, 1, 8, 8), 15.0, SynthesisOptions(elevation=0.0), overlap=overlap)
+
+
+def test_experiment_overlap_checked_against_the_layout(folder: CoilFolder) -> None:
+    with pytest.raises(ValueError, match=r"overlap=31 must be in \[0, alpha/2 = 30\]"):
+        CoilExperiment(seeds=6, overlap=31.0).circle(folder, [1])
+    with pytest.raises(TypeError, match="overlap"):
+        CoilExperiment(seeds=6, overlap="5")  # type: ignore[arg-type]
