@@ -7,7 +7,7 @@ the pair it starts (:func:`torch_eigview.synthesis.pair_of`'s rule). With an ``o
 each pair also extrapolates past both of its seeds, so near every seed the gallery holds
 the views of both pairs that meet there, each warping that seed by its own correspondence
 (COIL-20, every pose tested, 2-degree steps: M = 6 from 89.2 to 92.0 % with 20 degrees,
-M = 8 from 97.3 to 97.2 % with 14, M = 12 99.5 % with 10; each degree of overlap adds two
+M = 8 97.2 % with 14 (97.3 without, 1-degree steps), M = 12 99.5 % with 10; each degree adds two
 views per pair, so it is off by default and ``--overlap`` opts in). The baselines are the
 M seed views alone (``sparse``) and real views every S degrees (``dense``). The test views
 are every available pose that holds no real gallery view.
