@@ -100,6 +100,7 @@ def test_circle_run(folder: CoilFolder, method: str, n_gallery: int) -> None:
         (dict(seeds=4, views=3), "seeds=4 places its own seed views: it cannot take views=3"),
         (dict(dense_step=10.0, method="dense"), "dense_step=10.0 is the full circle's dense baseline"),
         (dict(seeds=4, dense_step=10.0), "it needs seeds and method 'dense'"),
+        (dict(overlap=5.0), "overlap=5.0 extends the full circle's sectors: it needs seeds"),
     ],
 )
 def test_config_errors(kwargs: dict[str, object], match: str) -> None:
@@ -125,6 +126,9 @@ def test_config_errors(kwargs: dict[str, object], match: str) -> None:
         (["--seeds", "4", "--views", "3"], "--seeds 4 places its own seed views: it cannot take --views 3"),
         (["--seeds", "4", "--dense-step", "10"], "--dense-step 10 needs --method dense"),
         (["--dense-step", "10", "--alpha", "10"], "--dense-step 10 needs --seeds"),
+        (["--overlap", "5", "--alpha", "10"], "--overlap 5 needs --seeds"),
+        (["--seeds", "6", "--overlap", "40"], r"--overlap=40 must be in \[0, alpha/2 = 30\]"),
+        (["--seeds", "4", "--overlap", "5"], "--overlap=5 must be .* below 90 - alpha = 0"),
         (["--seeds", "4", "--alpha", "10"], "--alpha 10 contradicts --seeds 4"),
         ([], "--alpha is required"),
     ],
@@ -152,3 +156,34 @@ def test_cli_sparse_circle_json(coil_root: Path, tmp_path: Path) -> None:
     record = json.loads(out.read_text())
     assert record["n_train_views"] == 12 and record["n_test"] == 2 * 66
     assert set(record["pose_error_deg"]) == {"mean", "median"}
+
+
+def test_synthesize_circle_overlap() -> None:
+    """With an overlap each pair also extrapolates past both of its seeds; its views inside
+    the sector stay those without one."""
+    g = torch.Generator().manual_seed(0)
+    seeds = torch.zeros(6, 1, 16, 16)
+    seeds[:, :, 4:12, 5:11] = torch.rand(6, 1, 8, 6, generator=g) * 0.8 + 0.2
+    opts = SynthesisOptions(elevation=0.0, extent=False)
+    plain = synthesize_circle(seeds, 15.0, opts)
+    out = synthesize_circle(seeds, 15.0, opts, overlap=15.0)
+    # Per pair (alpha = 60): -15 and 75 past its seeds, 0, 15, 30, 45 in its sector.
+    assert out.views.shape == (6 * 6, 1, 16, 16)
+    assert out.thetas[:6].tolist() == [345.0, 0.0, 15.0, 30.0, 45.0, 75.0]
+    assert out.thetas[6:12].tolist() == [45.0, 60.0, 75.0, 90.0, 105.0, 135.0]
+    assert out.pairs.tolist() == [k for k in range(6) for _ in range(6)]
+    inside = torch.tensor([t % 6 not in (0, 5) for t in range(36)])
+    torch.testing.assert_close(out.views[inside], plain.views, atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize(("m", "overlap"), [(6, -1.0), (6, 31.0), (6, float("nan")), (4, 15.0)])
+def test_synthesize_circle_overlap_errors(m: int, overlap: float) -> None:
+    with pytest.raises(ValueError, match="overlap"):
+        synthesize_circle(torch.rand(m, 1, 8, 8), 15.0, SynthesisOptions(elevation=0.0), overlap=overlap)
+
+
+def test_experiment_overlap_checked_against_the_layout(folder: CoilFolder) -> None:
+    with pytest.raises(ValueError, match=r"overlap=31 must be in \[0, alpha/2 = 30\]"):
+        CoilExperiment(seeds=6, overlap=31.0).circle(folder, [1])
+    with pytest.raises(TypeError, match="overlap"):
+        CoilExperiment(seeds=6, overlap="5")  # type: ignore[arg-type]

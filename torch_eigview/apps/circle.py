@@ -3,7 +3,12 @@
 M seed views evenly spaced over 360° from ``center`` (α = 360°/M); every consecutive pair,
 the last seed with the first included, synthesizes its own sector [0, α) from its first
 seed, so the gallery goes once round the turntable and every seed's own view comes from
-the pair it starts (:func:`torch_eigview.synthesis.pair_of`'s rule). The baselines are the
+the pair it starts (:func:`torch_eigview.synthesis.pair_of`'s rule). With an ``overlap``
+each pair also extrapolates past both of its seeds, so near every seed the gallery holds
+the views of both pairs that meet there, each warping that seed by its own correspondence
+(COIL-20, every pose tested, 2-degree steps: M = 6 from 89.2 to 92.0 % with 20 degrees,
+M = 8 97.2 % with 14 (97.3 without, 1-degree steps), M = 12 99.5 % with 10; each degree adds two
+views per pair, so it is off by default and ``--overlap`` opts in). The baselines are the
 M seed views alone (``sparse``) and real views every S degrees (``dense``). The test views
 are every available pose that holds no real gallery view.
 """
@@ -16,11 +21,11 @@ from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.check import check_int
+from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.angles import angle_range
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
 
-__all__ = ["CircleLayout", "circle_layout", "synthesize_circle"]
+__all__ = ["CircleLayout", "check_overlap", "circle_layout", "synthesize_circle"]
 
 _TOL = 1e-6
 
@@ -121,30 +126,58 @@ def circle_layout(
     return CircleLayout(seed_poses, alpha, real, tests)
 
 
+def check_overlap(m: int, overlap: object, name: str = "overlap") -> float:
+    """``overlap`` as a float, or a ValueError naming ``name``: it must lie in [0, α/2]
+    (α = 360/M) and, above 0, keep α + overlap below 90 degrees (Eq. 7 holds within a
+    quarter turn of a pair's first seed)."""
+    value = check_number(overlap, name)
+    alpha = 360.0 / m
+    if not (0 <= value <= alpha / 2 and (value == 0 or alpha + value < 90)):
+        raise ValueError(
+            f"{name}={value:g} must be in [0, alpha/2 = {alpha / 2:g}] degrees and, above 0, below "
+            f"90 - alpha = {90 - alpha:g} (M={m}: Eq. 7 holds within a quarter turn of a pair's first seed)"
+        )
+    return value
+
+
 def synthesize_circle(
     seeds: torch.Tensor,
     step: float,
     options: SynthesisOptions | None = None,
     masks: torch.Tensor | None = None,
+    overlap: float = 0.0,
 ) -> SynthesizedViews:
     """One object's views all round from its M evenly spaced seed views.
 
-    Pair k (seeds k and k + 1 mod M) synthesizes θ = 0, step, … < α = 360/M from seed k.
+    Pair k (seeds k and k + 1 mod M) synthesizes θ = 0, step, … < α = 360/M from seed k;
+    with an ``overlap`` it also extrapolates ``overlap`` degrees past each of its seeds
+    (θ = −overlap … < 0 and α < θ <= α + overlap, on the grid of ``step``), so near every
+    seed the gallery holds the views of both pairs that meet there.
 
     Args:
         seeds: (M, C, H, W) seed views at 0, α, …, (M − 1)·α from the first, M >= 3.
         step: angle between synthesized views in degrees.
         options: the synthesis options.
         masks: optional (M, H, W) bool seed masks, in place of the brightness threshold.
+        overlap: degrees each pair extrapolates past its seeds, in [0, α/2] and below
+            90 − α (Eq. 7 holds within a quarter turn of a pair's first seed).
 
     Returns:
         :class:`~torch_eigview.synthesis.SynthesizedViews`: (M·T, C, H, W) views, their
         angles from the first seed in [0, 360), one elevation per pair, the times and
         each view's pair k.
+
+    Raises:
+        ValueError: ``overlap`` outside [0, α/2] or not below 90 − α.
     """
     m = seeds.shape[0]
     alpha = 360.0 / m
+    overlap = check_overlap(m, overlap)
     thetas = [t for t in angle_range(0.0, alpha, step, "circle step") if t < alpha - _TOL]
+    n_out = math.floor(overlap / step + _TOL)
+    thetas = (
+        [-step * i for i in range(n_out, 0, -1)] + thetas + [alpha + step * i for i in range(n_out + 1)][1:]
+    )
     views, elevations, seconds = [], [], {"correspondence": 0.0, "synthesis": 0.0}
     for k in range(m):
         pair = [k, (k + 1) % m]
@@ -155,6 +188,6 @@ def synthesize_circle(
         elevations += out.elevations
         for key, value in out.seconds.items():
             seconds[key] += value
-    angles = torch.tensor([k * alpha + t for k in range(m) for t in thetas], dtype=torch.float64)
+    angles = torch.tensor([(k * alpha + t) % 360 for k in range(m) for t in thetas], dtype=torch.float64)
     pairs = torch.arange(m).repeat_interleave(len(thetas))
     return SynthesizedViews(torch.cat(views), angles, elevations, seconds, pairs)

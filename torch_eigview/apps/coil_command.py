@@ -73,6 +73,13 @@ def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         metavar="S",
         help="with --seeds and --method dense: real views every S degrees (default about 180/M)",
     )
+    coil.add_argument(
+        "--overlap",
+        type=finite_arg("--overlap"),
+        default=None,
+        metavar="DEG",
+        help="with --seeds: degrees each seed pair extrapolates past its seeds, below 90 - 360/M (default 0)",
+    )
     _add_method_arguments(coil)
 
 
@@ -195,8 +202,9 @@ def _check_circle_flags(args: argparse.Namespace) -> None:
     if args.seeds is None:
         if args.alpha is None:
             raise ValueError("--alpha is required (the angle between seed views), unless --seeds is given")
-        if args.dense_step is not None:
-            raise ValueError(f"--dense-step {args.dense_step:g} needs --seeds (the full circle)")
+        for flag, value in (("--dense-step", args.dense_step), ("--overlap", args.overlap)):
+            if value is not None:
+                raise ValueError(f"{flag} {value:g} needs --seeds (the full circle)")
         return
     if args.seeds < 2:
         raise ValueError(f"--seeds={args.seeds} must be >= 2")
@@ -243,6 +251,7 @@ def run_coil(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         dense_step=args.dense_step,
         interpolate_pose=args.pose == "interpolate",
+        overlap=0.0 if args.overlap is None else args.overlap,
     )
     if args.seeds is not None:
         experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))

@@ -11,7 +11,13 @@
   synthesized angles that exist (every 5°, the seeds' own poses left out), per center
   and for the full circle, as the mean absolute intensity difference over the pixels
   both seeds see and over the rest of the foreground (real or synthesized), for the
-  default options and for each stage ablated or swapped (:data:`ABLATIONS`).
+  default options and for each stage ablated or swapped (:data:`ABLATIONS`);
+- ``pose``: where the full circle's pose error comes from (``--pose-seeds`` M, the
+  ``eigview coil`` defaults otherwise): the mean and median error of the correctly
+  recognized views, over all objects and without the nearly rotationally symmetric ones
+  (:func:`symmetric_objects`), then per object and per position within a sector (its
+  angle from the sector's first seed) with the median signed error (predicted − true:
+  negative where a view is taken for one nearer the sector's first seed).
 
 Every figure comes from the same code as ``eigview coil``; the same settings hold for
 every object and pose.
@@ -21,7 +27,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import statistics
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import torch
 
@@ -33,7 +41,17 @@ from torch_eigview.synthesis import SynthesisOptions, pair_geometry
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent, resolve_extent
 from torch_eigview.warp.novel_view import NovelViewWarp
 
-__all__ = ["ABLATIONS", "center_table", "circle_table", "main", "synthesis_error"]
+__all__ = [
+    "ABLATIONS",
+    "PoseRecord",
+    "center_table",
+    "circle_table",
+    "main",
+    "pose_records",
+    "pose_summary",
+    "symmetric_objects",
+    "synthesis_error",
+]
 
 # Each stage of the synthesis swapped for an alternative (or switched off), one at a time.
 ABLATIONS: dict[str, dict[str, object]] = {
@@ -106,6 +124,83 @@ def synthesis_error(
             count += counts.sum(dim=0).double()
     mean = total / count.clamp_min(1)
     return float(mean[0]), float(mean[1])
+
+
+@dataclass(frozen=True)
+class PoseRecord:
+    """One correctly recognized test view: its object, true pose and signed pose error
+    (predicted − true, wrapped to (−180, 180], degrees)."""
+
+    obj: int
+    truth: float
+    error: float
+
+
+def pose_records(
+    folder: CoilFolder, objects: list[int], m: int, k: int, interpolate: bool = False
+) -> tuple[list[PoseRecord], float]:
+    """The full circle with M seeds (``eigview coil --seeds M`` otherwise at its defaults):
+    a :class:`PoseRecord` per correctly recognized test view, and α = 360 / M."""
+    exp = CoilExperiment(seeds=m, components=k, objects=objects, interpolate_pose=interpolate)
+    result = exp.run(folder)
+    layout = exp.circle(folder, objects)
+    truth = torch.tensor(layout.tests, dtype=torch.float64)
+    records = []
+    for obj in objects:
+        pred = result.recognizer.predict(folder.images(obj, layout.tests), interpolate_pose=interpolate)
+        error = wrap_degrees(pred.poses.double() - truth)
+        for t, e, ok in zip(layout.tests, error.tolist(), (pred.labels == obj).tolist(), strict=True):
+            if ok:
+                records.append(PoseRecord(obj, t, e))
+    return records, layout.alpha
+
+
+def symmetric_objects(folder: CoilFolder, objects: Sequence[int], below: float) -> list[int]:
+    """The objects whose real views change less than ``below`` per pose step: the mean
+    distance between consecutive poses' unit-norm views (cups, tubs: no defined pose)."""
+    out = []
+    for obj in objects:
+        views = folder.images(obj, folder.poses(obj)).flatten(1).double()
+        views = views / views.norm(dim=1, keepdim=True).clamp_min(1e-12)
+        if float((views - views.roll(1, 0)).norm(dim=1).mean()) < below:
+            out.append(obj)
+    return out
+
+
+def _errors_line(name: str, errors: Sequence[float]) -> str:
+    """``name  n  mean|e|  median|e|  median signed e`` (NaN when there are none)."""
+    if not errors:
+        return f"{name:>16} {0:5d} {'nan':>7} {'nan':>7} {'nan':>7}"
+    absolute = [abs(e) for e in errors]
+    return (
+        f"{name:>16} {len(errors):5d} {statistics.mean(absolute):7.2f} "
+        f"{statistics.median(absolute):7.2f} {statistics.median(errors):+7.2f}"
+    )
+
+
+def pose_summary(records: Sequence[PoseRecord], alpha: float, symmetric: Sequence[int]) -> str:
+    """The pose-error table of :func:`pose_records`' records.
+
+    Example:
+        >>> rows = [PoseRecord(1, 10.0, -4.0), PoseRecord(1, 35.0, 2.0), PoseRecord(2, 10.0, 30.0)]
+        >>> print(pose_summary(rows, 45.0, [2]).splitlines()[2])
+                     all     3   12.00    4.00   +2.00
+    """
+    lines = [
+        "pose error of correctly recognized views, degrees (signed: predicted - true)",
+        f"{'':>16} {'n':>5} {'mean':>7} {'median':>7} {'signed':>7}",
+        _errors_line("all", [r.error for r in records]),
+        _errors_line(
+            f"w/o {','.join(map(str, symmetric)) or '-'}",
+            [r.error for r in records if r.obj not in symmetric],
+        ),
+    ]
+    for obj in sorted({r.obj for r in records}):
+        lines.append(_errors_line(f"object {obj}", [r.error for r in records if r.obj == obj]))
+    for position in sorted({round(r.truth % alpha, 6) for r in records}):
+        errors = [r.error for r in records if abs(r.truth % alpha - position) < 1e-6]
+        lines.append(_errors_line(f"sector +{position:g}", errors))
+    return "\n".join(lines)
 
 
 def center_table(folder: CoilFolder, objects: list[int], centers: list[float], alpha: float, k: int) -> str:
@@ -181,7 +276,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m torch_eigview.apps.diagnose", description=__doc__.splitlines()[0]
     )
-    p.add_argument("tables", nargs="+", choices=("centers", "circle", "synthesis"))
+    p.add_argument("tables", nargs="+", choices=("centers", "circle", "synthesis", "pose"))
     p.add_argument("--root", required=True, help="COIL folder")
     p.add_argument("--objects", default=None, help="e.g. 1-20 (default: all)")
     p.add_argument("--centers", type=float, nargs="+", default=[0.0, 90.0, 180.0, 270.0])
@@ -190,6 +285,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--circle-components", type=int, default=20, help="k of the full circle")
     p.add_argument("--seeds", type=int, nargs="+", default=[4, 6, 8, 12], help="M of the full circle")
     p.add_argument("--step", type=float, default=5.0, help="the full circle's synthesized step, degrees")
+    p.add_argument("--pose-seeds", type=int, default=8, help="M of the pose table")
+    p.add_argument(
+        "--symmetric-below",
+        type=float,
+        default=0.1,
+        help="the pose table leaves out objects whose unit-norm views change less than this per pose step",
+    )
+    p.add_argument("--interpolate", action="store_true", help="the pose table scores --pose interpolate")
     args = p.parse_args(argv)
     folder = CoilFolder(args.root)
     objects = folder.objects if args.objects is None else parse_object_spec(args.objects)
@@ -198,6 +301,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(center_table(folder, objects, args.centers, args.alpha, args.components))
         elif table == "circle":
             print(circle_table(folder, objects, args.seeds, args.circle_components, args.step))
+        elif table == "pose":
+            records, alpha = pose_records(folder, objects, args.pose_seeds, args.components, args.interpolate)
+            print(pose_summary(records, alpha, symmetric_objects(folder, objects, args.symmetric_below)))
         else:
             print(synthesis_table(folder, objects, args.centers, args.alpha, max(args.seeds[0], 3)))
     return 0

@@ -34,7 +34,12 @@ from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.apps.circle import CircleLayout, circle_layout, synthesize_circle
+from torch_eigview.apps.circle import (
+    CircleLayout,
+    check_overlap,
+    circle_layout,
+    synthesize_circle,
+)
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
 from torch_eigview.check import (
     VIEW_LIMIT,
@@ -129,6 +134,8 @@ class CoilExperiment:
             the nearest gallery view and its neighbours
             (:meth:`~torch_eigview.nn.recognition.NearestNeighborRecognizer.interpolate_poses`),
             not the nearest view's pose.
+        overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
+            (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
     """
 
     alpha: float = 5.0
@@ -147,6 +154,7 @@ class CoilExperiment:
     seeds: int | None = None
     dense_step: float | None = None
     interpolate_pose: bool = False
+    overlap: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kernel is not None:
@@ -183,6 +191,8 @@ class CoilExperiment:
                 raise ValueError(
                     f"seeds={self.seeds} places its own seed views: it cannot take views={self.views}"
                 )
+        if check_number(self.overlap, "overlap") != 0 and self.seeds is None:
+            raise ValueError(f"overlap={self.overlap} extends the full circle's sectors: it needs seeds")
         if self.dense_step is not None and (self.seeds is None or self.method != "dense"):
             raise ValueError(
                 f"dense_step={self.dense_step} is the full circle's dense baseline: it needs seeds and "
@@ -232,7 +242,10 @@ class CoilExperiment:
             raise ValueError("circle() needs seeds (the full circle's number of seed views), got None")
         objs = folder.objects if objects is None else objects
         common = set.intersection(*(set(folder.poses(obj)) for obj in objs))
-        return circle_layout(sorted(common), self._center, self.seeds, self.method, self.dense_step, names)
+        layout = circle_layout(sorted(common), self._center, self.seeds, self.method, self.dense_step, names)
+        if self.overlap != 0:
+            check_overlap(self.seeds, self.overlap, "--overlap" if names[0] == "--seeds" else "overlap")
+        return layout
 
     def _gallery_of(
         self,
@@ -261,7 +274,7 @@ class CoilExperiment:
             warnings.simplefilter("always", ElevationFallbackWarning)
             try:
                 if layout is not None:
-                    out = synthesize_circle(seeds, self.synth[2], self.synthesis)
+                    out = synthesize_circle(seeds, self.synth[2], self.synthesis, overlap=self.overlap)
                 else:
                     out = synthesize_views(seeds, self.alpha, self.synth_angles(), self.synthesis)
             except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
