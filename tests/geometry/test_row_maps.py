@@ -232,3 +232,21 @@ def test_fill_row_holes_object_rows(dtype: torch.dtype) -> None:
     assert torch.equal(filled[hit], src[hit])
     flat = fill_row_holes(src.reshape(-1, w), hit.reshape(-1, w), fallback.expand_as(src).reshape(-1, w))
     assert torch.equal(flat.view_as(filled), filled)  # rows are independent of their batching
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fill_row_holes_paths_agree_bit_for_bit(dtype: torch.dtype) -> None:
+    """Mostly hits (the holes gathered alone) and mostly holes (row interiors) give the
+    same values: rows are independent, and rows of holes added below push a batch from
+    one path to the other."""
+    gen = torch.Generator().manual_seed(3)
+    src = torch.rand(6, 40, generator=gen, dtype=dtype) * 40
+    hit = torch.rand(6, 40, generator=gen) > 0.2
+    hit[2] = False  # a row without hits: the fallback
+    hit[3, :5] = hit[3, -7:] = False  # holes before the first hit and after the last
+    fallback = torch.linspace(-3.0, 41.0, 40, dtype=dtype)
+    dense = fill_row_holes(src, hit, fallback)  # mostly hits
+    padded = torch.cat([src, torch.zeros(30, 40, dtype=dtype)])
+    sparse = fill_row_holes(padded, torch.cat([hit, torch.zeros(30, 40, dtype=torch.bool)]), fallback)
+    assert torch.equal(dense, sparse[:6])
+    assert torch.equal(dense[hit], src[hit]) and torch.equal(dense[2], fallback)
