@@ -77,7 +77,13 @@ SEEDS_AND_RANGES = [
     _fit("seeds-M-2", "--seeds", "2", *SYNTH, match=r"--seeds 2: .*integer >= 3"),
     _fit("seeds-M-fraction", "--seeds", "3.5", *SYNTH, match=r"--seeds 3\.5: .*integer >= 3"),
     _fit("seeds-M-negative", "--seeds", "-4", *SYNTH, match=r"--seeds -4: .*integer >= 3"),
-    _fit("seeds-M-huge", "--seeds", "1e12", *SYNTH, match=r"--seeds asks for 1e\+12 seed views round the circle, more than the limit of 3600.*EIGVIEW_MAX_VIEWS"),
+    _fit(
+        "seeds-M-huge",
+        "--seeds",
+        "1e12",
+        *SYNTH,
+        match=r"--seeds asks for 1e\+12 seed views round the circle, more than the limit of 3600.*EIGVIEW_MAX_VIEWS",
+    ),
     _fit("seeds-repeat", "--seeds", "0", "0", *SYNTH, match=r"--seeds 0 0 repeats an azimuth"),
     _fit("seeds-repeat-wrapped", "--seeds", "0", "360", *SYNTH, match=r"--seeds 0 360 repeats an azimuth"),
     _fit(
@@ -136,7 +142,9 @@ SEEDS_AND_RANGES = [
     ),
     _fit("reject-poses-step-0", *SEEDS, *SYNTH, "--reject-poses", "-5", "5", "0", match=r"reject-poses step"),
     _fit("reject-poses-nan", *SEEDS, *SYNTH, "--reject-poses", "nan", "5", "1", match=r"--reject-poses.*nan"),
-    _fit("reject-rate-0", *SEEDS, *SYNTH, "--reject-rate", "0", match=r"--reject-rate must be .*\(0, 1\).*'0'"),
+    _fit(
+        "reject-rate-0", *SEEDS, *SYNTH, "--reject-rate", "0", match=r"--reject-rate must be .*\(0, 1\).*'0'"
+    ),
     _fit("reject-rate-1", *SEEDS, *SYNTH, "--reject-rate", "1", match=r"--reject-rate.*'1'"),
     _fit("reject-rate-nan", *SEEDS, *SYNTH, "--reject-rate", "nan", match=r"--reject-rate.*'nan'"),
     _fit("reject-rate-text", *SEEDS, *SYNTH, "--reject-rate", "most", match=r"--reject-rate.*'most'"),
@@ -145,18 +153,53 @@ SEEDS_AND_RANGES = [
 OPTIONS = [
     _fit("size-0", *SEEDS, *SYNTH, "--size", "0", "32", match=r"--size.*0"),
     _fit("size-negative", *SEEDS, *SYNTH, "--size", "32", "-1", match=r"--size.*-1"),
-    _fit("size-huge", *SEEDS, *SYNTH, "--size", "100000", "100000", match=r"--size.*100000.*EIGVIEW_MAX_IMAGE_SIDE"),
+    _fit(
+        "size-huge",
+        *SEEDS,
+        *SYNTH,
+        "--size",
+        "100000",
+        "100000",
+        match=r"--size.*100000.*EIGVIEW_MAX_IMAGE_SIDE",
+    ),
     _fit("size-1", *SEEDS, *SYNTH, "--size", "1", "1", match=r"--size=1 must be >= 2"),
     _fit("size-text", *SEEDS, *SYNTH, "--size", "big", "32", match=r"--size.*big"),
     _fit("channels-2", *SEEDS, *SYNTH, "--channels", "2", match=r"--channels.*2"),
-    _fit("background-300", *SEEDS, *SYNTH, "--background", "300,0,0", match=r"--background '300,0,0' must be"),
+    _fit(
+        "background-300", *SEEDS, *SYNTH, "--background", "300,0,0", match=r"--background '300,0,0' must be"
+    ),
     _fit("background-name", *SEEDS, *SYNTH, "--background", "red", match=r"--background 'red' must be"),
     _fit("background-two-values", *SEEDS, *SYNTH, "--background", "1,2", match=r"--background '1,2' must be"),
     _fit("background-nan", *SEEDS, *SYNTH, "--background", "nan", match=r"--background 'nan' must be"),
     _fit("tolerance-0", *SEEDS, *SYNTH, "--background", "auto", "--tolerance", "0", match=r"--tolerance '0'"),
-    _fit("tolerance-negative", *SEEDS, *SYNTH, "--background", "auto", "--tolerance", "-3", match=r"--tolerance.*-3"),
-    _fit("tolerance-nan", *SEEDS, *SYNTH, "--background", "auto", "--tolerance", "nan", match=r"--tolerance.*nan"),
-    _fit("tolerance-with-keep", *SEEDS, *SYNTH, "--tolerance", "10", match=r"--tolerance goes with --background"),
+    _fit(
+        "tolerance-negative",
+        *SEEDS,
+        *SYNTH,
+        "--background",
+        "auto",
+        "--tolerance",
+        "-3",
+        match=r"--tolerance.*-3",
+    ),
+    _fit(
+        "tolerance-nan",
+        *SEEDS,
+        *SYNTH,
+        "--background",
+        "auto",
+        "--tolerance",
+        "nan",
+        match=r"--tolerance.*nan",
+    ),
+    _fit(
+        "tolerance-with-keep",
+        *SEEDS,
+        *SYNTH,
+        "--tolerance",
+        "10",
+        match=r"--tolerance goes with --background",
+    ),
     _fit(
         "background-leaves-no-object",
         *SEEDS,
@@ -183,10 +226,23 @@ OPTIONS = [
     _fit("threads-0", *SEEDS, *SYNTH, "--threads", "0", match=r"--threads.*0"),
     Case(
         "manifest-and-pattern",
-        command("fit", "--manifest", "a.csv", "--pattern", "{{object}}/{{azimuth}}.png", *SEEDS, "--out", "{tmp}/m"),
+        command(
+            "fit",
+            "--manifest",
+            "a.csv",
+            "--pattern",
+            "{{object}}/{{azimuth}}.png",
+            *SEEDS,
+            "--out",
+            "{tmp}/m",
+        ),
         r"--pattern.*not allowed with.*--manifest|--manifest.*--pattern",
     ),
-    Case("neither-manifest-nor-pattern", command("fit", *SEEDS, "--out", "{tmp}/m.pt"), r"--manifest.*--pattern"),
+    Case(
+        "neither-manifest-nor-pattern",
+        command("fit", *SEEDS, "--out", "{tmp}/m.pt"),
+        r"--manifest.*--pattern",
+    ),
     Case(
         "pattern-without-root",
         command("fit", "--pattern", "{{object}}/{{azimuth}}.png", *SEEDS, *SYNTH, "--out", "{tmp}/m.pt"),
@@ -196,9 +252,27 @@ OPTIONS = [
 ]
 
 MANIFEST_FILES = [
-    _fit("manifest-missing", *SEEDS, *SYNTH, setup=lambda t: None, match=r"views\.csv.*(does not exist|cannot be read|No such)"),
-    _fit("manifest-directory", *SEEDS, *SYNTH, setup=lambda t: os.mkdir(t / "views.csv"), match=r"views\.csv.*directory"),
-    _fit("manifest-fifo", *SEEDS, *SYNTH, setup=lambda t: files.fifo(t / "views.csv"), match=r"views\.csv.*FIFO"),
+    _fit(
+        "manifest-missing",
+        *SEEDS,
+        *SYNTH,
+        setup=lambda t: None,
+        match=r"views\.csv.*(does not exist|cannot be read|No such)",
+    ),
+    _fit(
+        "manifest-directory",
+        *SEEDS,
+        *SYNTH,
+        setup=lambda t: os.mkdir(t / "views.csv"),
+        match=r"views\.csv.*directory",
+    ),
+    _fit(
+        "manifest-fifo",
+        *SEEDS,
+        *SYNTH,
+        setup=lambda t: files.fifo(t / "views.csv"),
+        match=r"views\.csv.*FIFO",
+    ),
     _fit(
         "manifest-symlink-loop",
         *SEEDS,
@@ -206,7 +280,9 @@ MANIFEST_FILES = [
         setup=lambda t: os.symlink(t / "views.csv", t / "views.csv"),
         match=r"views\.csv.*(symbolic links|loop|cannot be read)",
     ),
-    _fit("manifest-header-only", *SEEDS, *SYNTH, setup=_only(""), match=r"views\.csv.*(no view|empty|holds no)"),
+    _fit(
+        "manifest-header-only", *SEEDS, *SYNTH, setup=_only(""), match=r"views\.csv.*(no view|empty|holds no)"
+    ),
     _fit(
         "object-one-view",
         *SEEDS,
@@ -262,20 +338,61 @@ def _tiny(tmp: Path, side: int) -> None:
 OUTPUTS = [
     Case(
         "out-is-the-manifest",
-        intact(command("fit", "--manifest", "{tmp}/views.csv", *SEEDS, *SYNTH, "--out", "{tmp}/views.csv", setup=views.manifest), "views.csv"),
+        intact(
+            command(
+                "fit",
+                "--manifest",
+                "{tmp}/views.csv",
+                *SEEDS,
+                *SYNTH,
+                "--out",
+                "{tmp}/views.csv",
+                setup=views.manifest,
+            ),
+            "views.csv",
+        ),
         r"--out.*views\.csv.*(input|--manifest)",
     ),
     Case(
         "out-is-a-seed-image",
-        intact(command("fit", "--manifest", "{tmp}/views.csv", *SEEDS, *SYNTH, "--out", "{tmp}/egg/0.png", setup=views.manifest), "egg/0.png"),
+        intact(
+            command(
+                "fit",
+                "--manifest",
+                "{tmp}/views.csv",
+                *SEEDS,
+                *SYNTH,
+                "--out",
+                "{tmp}/egg/0.png",
+                setup=views.manifest,
+            ),
+            "egg/0.png",
+        ),
         r"--out.*egg/0\.png.*(input|manifest)",
     ),
     Case(
         "out-is-the-pattern-root",
-        command("fit", "--pattern", "{{object}}/{{azimuth}}.png", "--root", "{tmp}", *SEEDS, *SYNTH, "--out", "{tmp}", setup=views.manifest),
+        command(
+            "fit",
+            "--pattern",
+            "{{object}}/{{azimuth}}.png",
+            "--root",
+            "{tmp}",
+            *SEEDS,
+            *SYNTH,
+            "--out",
+            "{tmp}",
+            setup=views.manifest,
+        ),
         r"--out.*(directory|--root)",
     ),
-    _fit("out-missing-folder", *SEEDS, *SYNTH, out="{tmp}/none/m.pt", match=r"--out.*none.*(folder|directory).*(not exist|missing)"),
+    _fit(
+        "out-missing-folder",
+        *SEEDS,
+        *SYNTH,
+        out="{tmp}/none/m.pt",
+        match=r"--out.*none.*(folder|directory).*(not exist|missing)",
+    ),
     _fit("out-directory", *SEEDS, *SYNTH, out="{tmp}/egg", match=r"--out.*egg.*directory"),
     _fit("out-dev-full", *SEEDS, *SYNTH, out="/dev/full", match=r"--out.*/dev/full"),
 ]
