@@ -245,6 +245,9 @@ class ViewManifest:
         self, entries: Sequence[ViewEntry], name: str = "manifest", *, skipped: list[str] | None = None
     ) -> None:
         entries = list(entries)
+        if not entries and skipped:  # the cause is the bad lines, not an empty file
+            more = f" (and {len(skipped) - 1} more bad line(s))" if len(skipped) > 1 else ""
+            raise ValueError(f"{name} lists no usable view: {skipped[0]}{more}")
         if not entries:
             raise ValueError(f"{name} lists no view")
         if not all(isinstance(e, ViewEntry) for e in entries):
