@@ -101,6 +101,15 @@ def calibrate_rejection(
     check_ndim(views, "views", (2, 4), "(B, N) or (B, C, H, W)")
     if views.shape[0] == 0:
         raise ValueError("views must hold at least one held-out view to calibrate on, got B=0")
+    proj = recognizer.projection
+    shape = getattr(proj, "image_shape", None)
+    if views[0].numel() != proj.in_features or (
+        views.ndim == 4 and shape is not None and views.shape[1:] != shape
+    ):
+        raise ValueError(
+            f"views must have shape (B, {proj.in_features}) or (B, *{tuple(shape or ())}) like the "
+            f"recognizer's gallery, got {tuple(views.shape)}"
+        )
     if score != "difs" and not hasattr(recognizer.projection, "mean"):
         raise ValueError(
             f"score={score!r} needs the distance from feature space of a linear eigenspace; this "

@@ -61,7 +61,7 @@ def seed_foreground(seeds: torch.Tensor, masks: object, threshold: float) -> tor
 
     Raises:
         TypeError: ``masks`` is not a bool tensor.
-        ValueError: ``masks`` does not have shape (V, H, W).
+        ValueError: ``masks`` does not have shape (V, H, W), or one is all background.
     """
     if masks is None:
         return foreground_mask(seeds, threshold)
@@ -71,6 +71,11 @@ def seed_foreground(seeds: torch.Tensor, masks: object, threshold: float) -> tor
     if tuple(masks.shape) != want:
         raise ValueError(
             f"masks must have shape (V, H, W) = {want} to match the seeds, got {tuple(masks.shape)}"
+        )
+    empty = (~masks.flatten(1).any(1)).nonzero().flatten().tolist()
+    if empty:  # the warp would synthesize views of nothing, silently
+        raise ValueError(
+            f"masks[{empty[0]}] is all background (no True pixel): a seed view must show its object"
         )
     return masks.to(seeds.device)
 
@@ -116,8 +121,12 @@ def resolve_extent(extent: bool | str, masks: torch.Tensor) -> bool:
     Returns:
         A bool.
     """
+    if extent != "auto" and not isinstance(extent, bool):
+        raise ValueError(f"extent must be True, False or 'auto', got {extent!r}")
+    if not isinstance(masks, torch.Tensor) or masks.dtype != torch.bool:
+        raise TypeError(f"masks must be a bool tensor (True on the object), got {masks!r:.80}")
     if extent != "auto":
-        return bool(extent)
+        return extent
     return bool((box_fill(masks) >= FILLED_FRAME).all())
 
 
