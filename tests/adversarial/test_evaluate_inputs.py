@@ -119,6 +119,13 @@ PREP = [
     ),
 ]
 
+#: Tampered rejection thresholds (t_dffs, t_difs): (case id, values, what the error shows).
+THRESHOLDS = [
+    ("nan", [math.nan, math.nan], "nan"),
+    ("negative", [-1.0, -1.0], "-1"),
+    ("zero", [0.0, 0.0], "0"),
+]
+
 EVALUATE = [
     _evaluate("model-missing", "--model", "{tmp}/none.pt", *VIEWS, match=r"none\.pt.*does not exist"),
     _evaluate("model-is-the-manifest", "--model", "{tmp}/views.csv", *VIEWS, match=r"views\.csv"),
@@ -135,21 +142,16 @@ EVALUATE = [
         _evaluate(f"prep-{id}", *MODEL, *VIEWS, setup=_tampered(**change), match=r"model\.pt.*" + match)
         for id, change, match in PREP
     ),
-    _evaluate(
-        "reject-thresholds-nan",
-        *MODEL,
-        *VIEWS,
-        "--reject",
-        setup=_tampered(reject_thresholds=[math.nan, math.nan]),
-        match=r"model\.pt.*(reject_thresholds|threshold).*nan",
-    ),
-    _evaluate(
-        "reject-thresholds-negative",
-        *MODEL,
-        *VIEWS,
-        "--reject",
-        setup=_tampered(reject_thresholds=[-1.0, -1.0]),
-        match=r"model\.pt.*(reject_thresholds|threshold).*-1",
+    *(
+        _evaluate(
+            f"reject-thresholds-{id}",
+            *MODEL,
+            *VIEWS,
+            "--reject",
+            setup=_tampered(reject_thresholds=values),
+            match=r"model\.pt.*(reject_thresholds|threshold).*" + match,
+        )
+        for id, values, match in THRESHOLDS
     ),
     _evaluate(
         "reject-without-thresholds",
@@ -176,7 +178,7 @@ EVALUATE = [
             views.model(t),
             (t / "views.csv").write_text("path,object,azimuth\nnone.png,egg,0\n"),
         ),
-        match=r"views\.csv lists no usable view: .*views\.csv line 2: image .*none\.png does not exist",
+        match=r"views\.csv lists no view, only bad lines: .*views\.csv line 2: image .*none\.png does not exist",
     ),
     _evaluate(
         "pattern-without-root",

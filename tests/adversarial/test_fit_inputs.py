@@ -335,41 +335,15 @@ def _tiny(tmp: Path, side: int) -> None:
     (tmp / "views.csv").write_text("path,object,azimuth\n0.png,a,0\n10.png,a,10\n")
 
 
+def _fit_over(id: str, name: str, match: str) -> Case:
+    """``eigview fit --out {tmp}/NAME`` where NAME is one of its inputs, which must keep its bytes."""
+    argv = ("fit", "--manifest", "{tmp}/views.csv", *SEEDS, *SYNTH, "--out", "{tmp}/" + name)
+    return Case(id, intact(command(*argv, setup=views.manifest), name), match)
+
+
 OUTPUTS = [
-    Case(
-        "out-is-the-manifest",
-        intact(
-            command(
-                "fit",
-                "--manifest",
-                "{tmp}/views.csv",
-                *SEEDS,
-                *SYNTH,
-                "--out",
-                "{tmp}/views.csv",
-                setup=views.manifest,
-            ),
-            "views.csv",
-        ),
-        r"--out.*views\.csv.*(input|--manifest)",
-    ),
-    Case(
-        "out-is-a-seed-image",
-        intact(
-            command(
-                "fit",
-                "--manifest",
-                "{tmp}/views.csv",
-                *SEEDS,
-                *SYNTH,
-                "--out",
-                "{tmp}/egg/0.png",
-                setup=views.manifest,
-            ),
-            "egg/0.png",
-        ),
-        r"--out.*egg/0\.png.*(input|manifest)",
-    ),
+    _fit_over("out-is-the-manifest", "views.csv", r"--out.*views\.csv.*(input|--manifest)"),
+    _fit_over("out-is-a-seed-image", "egg/0.png", r"--out.*egg/0\.png.*(input|manifest)"),
     Case(
         "out-is-the-pattern-root",
         command(

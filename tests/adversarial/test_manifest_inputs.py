@@ -168,7 +168,7 @@ CSV = [
     Case(
         "skipped-all-bad",
         lambda t: ViewManifest.from_csv(views.csv(t, HEAD + "none.png,egg,0\n"), skipped=[]),
-        r"m\.csv lists no usable view: .*m\.csv line 2: image .*none\.png does not exist",
+        r"m\.csv lists no view, only bad lines: .*m\.csv line 2: image .*none\.png does not exist",
     ),
 ]
 

@@ -79,7 +79,9 @@ class ViewDataset(Dataset[dict[str, Any]]):
     Args:
         manifest: The views.
         size: ``(H, W)`` every image and mask is resized to, or None to keep each file's
-            size (then a ``DataLoader`` batch needs files of one size).
+            size (then a ``DataLoader`` batch needs files of one size); each side at most
+            :data:`~torch_eigview.check.SIDE_LIMIT` (512; the environment variable
+            ``EIGVIEW_MAX_IMAGE_SIDE`` raises it).
         channels: ``1`` (RGB to gray with the BT.709 weights), ``3`` (gray repeated) or
             None to keep each file's channels.
         dtype: Floating dtype of the images.

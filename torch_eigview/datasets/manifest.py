@@ -247,7 +247,7 @@ class ViewManifest:
         entries = list(entries)
         if not entries and skipped:  # the cause is the bad lines, not an empty file
             more = f" (and {len(skipped) - 1} more bad line(s))" if len(skipped) > 1 else ""
-            raise ValueError(f"{name} lists no usable view: {skipped[0]}{more}")
+            raise ValueError(f"{name} lists no view, only bad lines: {skipped[0]}{more}")
         if not entries:
             raise ValueError(f"{name} lists no view")
         if not all(isinstance(e, ViewEntry) for e in entries):

@@ -126,7 +126,7 @@ def resolve_extent(extent: bool | str, masks: torch.Tensor) -> bool:
     if not isinstance(masks, torch.Tensor) or masks.dtype != torch.bool:
         raise TypeError(f"masks must be a bool tensor (True on the object), got {masks!r:.80}")
     if extent != "auto":
-        return extent
+        return bool(extent)
     return bool((box_fill(masks) >= FILLED_FRAME).all())
 
 
