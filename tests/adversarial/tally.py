@@ -15,6 +15,7 @@ from pathlib import Path
 from tests.adversarial import (
     test_api_inputs,
     test_api_inputs_2,
+    test_api_inputs_3,
     test_cli_files,
     test_cli_inputs,
     test_evaluate_inputs,
@@ -35,6 +36,7 @@ def main(argv: list[str]) -> int:
         test_manifest_inputs,
         test_evaluate_inputs,
         test_api_inputs_2,
+        test_api_inputs_3,
     )
     only = [m for m in modules if m.__name__.rsplit(".", 1)[1] in argv]  # e.g. test_fit_inputs
     for module in only or modules:
