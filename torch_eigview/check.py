@@ -229,6 +229,9 @@ def check_positive(value: object, name: str, *, allow_zero: bool = False) -> flo
 #: Views synthesized per object (every 0.1 degree over the whole turn by default): the
 #: environment variable that raises the limit, and the limit.
 VIEW_LIMIT = ("EIGVIEW_MAX_VIEWS", 3600)
+#: Pixels per side of an image a view is resized to (the commands' ``--size``): a view is
+#: held as H x W floats per channel, many times over.
+SIDE_LIMIT = ("EIGVIEW_MAX_IMAGE_SIDE", 512)
 
 
 def limit(env: str, default: int) -> int:

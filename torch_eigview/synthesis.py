@@ -359,14 +359,14 @@ def synthesize_views(
     Raises:
         ValueError: fewer than 2 seeds; a number of angles other than V − 1; seed angles
             that do not increase (an α_n <= 0) or coincide (α a multiple of 180); a span
-            of 180 degrees or more.
+            of 180 degrees or more; a seed mask that is all background.
     """
     opts = options or SynthesisOptions()
     seeds, steps = check_seeds(seeds, alpha)
     starts = _seed_angles(steps)
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1
-    masks = None if masks is None else seed_foreground(seeds, masks, opts.background)
+    masks = None if masks is None else seed_foreground(seeds, masks, opts.background, require_object=True)
     extent = resolve_extent(opts.extent, seed_foreground(seeds, masks, opts.background))
     if geometry is None:
         geometry = pair_geometry(seeds, alpha, opts, masks)

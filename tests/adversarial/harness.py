@@ -41,6 +41,12 @@ class LostData(AssertionError):
     """A case's check of the files it wrote failed."""
 
 
+class Expired(BaseException):
+    """Raised by :func:`deadline`: a BaseException, so that the command's own handler of
+    Exception (which prints ``eigview: error: ...`` and exits 2) cannot turn a hang into an
+    ordinary error."""
+
+
 @dataclass(frozen=True)
 class Case:
     """One bad input: ``run(tmp)`` calls an entry point; ``match`` is the error expected."""
@@ -108,10 +114,10 @@ def _after_setup(run: Callable[[Path], object], tmp: Path, snapshot: Callable[[]
 
 @contextlib.contextmanager
 def deadline(seconds: int = TIMEOUT) -> Iterator[None]:
-    """Raises TimeoutError in the calling thread after ``seconds`` (a blocked open too)."""
+    """Raises :class:`Expired` in the calling thread after ``seconds`` (a blocked open too)."""
 
     def expire(signum: int, frame: object) -> None:
-        raise TimeoutError(f"no answer within {seconds} s")
+        raise Expired(f"no answer within {seconds} s")
 
     previous = signal.signal(signal.SIGALRM, expire)
     signal.alarm(seconds)
@@ -137,7 +143,7 @@ def outcome(case: Case, tmp: Path) -> tuple[str, str]:
     try:
         with deadline():
             out = case.run(tmp)
-    except TimeoutError as exc:
+    except (Expired, TimeoutError) as exc:
         return "hang", str(exc)
     except LostData as exc:
         return "lost", str(exc)

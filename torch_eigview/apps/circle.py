@@ -168,9 +168,11 @@ def synthesize_circle(
         each view's pair k.
 
     Raises:
-        ValueError: ``overlap`` outside [0, α/2] or not below 90 − α.
+        ValueError: fewer than 3 seeds, or ``overlap`` outside [0, α/2] or not below 90 − α.
     """
     m = seeds.shape[0]
+    if m < 3:  # M = 2 puts the seeds 180 degrees apart, where Eq. 7's sin(alpha) is 0
+        raise ValueError(f"seeds must hold M >= 3 views evenly spaced round the circle, got M={m}")
     alpha = 360.0 / m
     overlap = check_overlap(m, overlap)
     thetas = [t for t in angle_range(0.0, alpha, step, "circle step") if t < alpha - _TOL]

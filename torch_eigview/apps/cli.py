@@ -172,6 +172,10 @@ def _run_synth(args: argparse.Namespace) -> int:
     unknown = sorted(set(shapes) - set(SHAPES))
     if unknown:
         raise ValueError(f"--shapes has unknown shape(s) {unknown}; known: {', '.join(SHAPES)}")
+    if args.masks != "given" and args.background != "textured":  # black views have no mask to estimate
+        raise ValueError(
+            f"--masks {args.masks} goes with --background textured, got --background {args.background}"
+        )
     record = run_synth(
         args.camera,
         args.alpha,

@@ -27,6 +27,7 @@ from torch_eigview.apps.predict import escape
 from torch_eigview.apps.view_inputs import (
     add_manifest_arguments,
     background_model,
+    check_not_views,
     label_table,
     load_manifest,
     load_model,
@@ -305,8 +306,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
     """Runs ``eigview evaluate``; returns 0, or 1 when rows were skipped."""
     check_outputs([("--json", args.json)], inputs=[("--model", args.model), *manifest_inputs(args)])
     recognizer, meta, prep = load_model(args.model)
+    if args.reject and not recognizer.rejects:
+        raise ValueError(
+            f"--reject needs a model with calibrated rejection (eigview fit without --no-reject); "
+            f"{args.model} has none"
+        )
     bad_lines: list[str] = []
     manifest = load_manifest(args, bad_lines)
+    check_not_views([("--json", args.json)], manifest)
     skipped: list[dict[str, str]] = []
     for message in bad_lines:
         _skip(skipped, message)
@@ -320,6 +327,11 @@ def run_evaluate(args: argparse.Namespace) -> int:
         entries = [
             e for e in entries if not any(abs((e.azimuth - a + 180.0) % 360.0 - 180.0) <= 1e-6 for a in seeds)
         ]
+        if not entries:
+            raise ValueError(
+                f"--exclude-seeds leaves no view of {manifest.name}: every view lies at a seed azimuth "
+                f"({', '.join(f'{a:g}' for a in seeds)} degrees) of {args.model}"
+            )
     ev = evaluate(
         recognizer,
         prep,

@@ -33,6 +33,7 @@ from torch_eigview.apps.view_inputs import (
     add_manifest_arguments,
     background_fields,
     background_model,
+    check_not_views,
     load_manifest,
     manifest_inputs,
 )
@@ -77,7 +78,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     fit.add_argument(
         "--size",
-        type=bounded_int_arg("--size", 1, ("EIGVIEW_MAX_IMAGE_SIDE", 512)),
+        type=bounded_int_arg("--size", 2, ("EIGVIEW_MAX_IMAGE_SIDE", 512)),  # the flow needs 2 x 2
         nargs=2,
         default=None,
         metavar=("H", "W"),
@@ -165,6 +166,7 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
         ValueError: one value that is not an integer >= 3; listed seeds that repeat an
             azimuth; a bad ``--synth`` range.
     """
+    from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
     from torch_eigview.geometry.angles import angle_range
 
     start, stop, step = synth
@@ -176,11 +178,17 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
                 f"--seeds {m:g}: one value is M, the number of seed views round the circle, an integer >= 3 "
                 "(M = 2 puts them 180 degrees apart, where Eq. 7's sin(alpha) is 0); or list two or more azimuths"
             )
+        check_limit(m, "--seeds", "seed views round the circle", *VIEW_LIMIT)
         azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
         return SeedPlan(azimuths, _wrap(center), 360.0 / m, None, step)
     steps = [_wrap(b - a) for a, b in itertools.pairwise(seeds)]
     if any(abs(s) < _TOL for s in steps):
         raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")
+    if any(abs(abs(s) - 180.0) < _TOL for s in steps):
+        raise ValueError(
+            f"--seeds {' '.join(f'{a:g}' for a in seeds)} puts consecutive seeds 180 degrees apart, a multiple "
+            "of 180 where Eq. 7's sin(alpha) is 0: list seeds less than 180 degrees apart"
+        )
     equal = all(abs(s - steps[0]) < _TOL for s in steps)
     # Each seed past the second extends the range on its side by its step (as CoilExperiment).
     extra = (len(steps) - 1) * steps[0] if equal else sum(steps[1:])
@@ -311,10 +319,17 @@ def run_fit(args: argparse.Namespace) -> int:
     fields = background_fields(args)
     plan = seed_plan(list(args.seeds), args.center, tuple(args.synth))
     manifest = load_manifest(args)
+    check_not_views([("--out", args.out)], manifest)
     objects = manifest.objects
     picked = {obj: pick_seeds(manifest, obj, plan.azimuths) for obj in objects}  # all checked first
     size = None if args.size is None else (args.size[0], args.size[1])
     first, _ = _read_seeds(picked[objects[0]][:1], size, args.channels)  # the size and channels
+    if min(first.shape[2:]) < 2:  # the flow takes image gradients
+        entry = picked[objects[0]][0]
+        raise ValueError(
+            f"{entry.source}: image {entry.path} is (H, W)={tuple(first.shape[2:])}, smaller than 2 x 2: "
+            "give --size H W to resize the views"
+        )
     size, channels = size or (first.shape[2], first.shape[3]), args.channels or first.shape[1]
     unit_norm = not args.no_unit_norm
     prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm, **fields)
@@ -334,9 +349,18 @@ def run_fit(args: argparse.Namespace) -> int:
             yield views, label, poses
 
     x, labels, poses = stack_gallery(blocks())
-    recognizer = build_recognizer(
-        x, labels, wrap_degrees(poses), args.components, unit_norm=unit_norm, label_names=objects
-    )
+    try:
+        recognizer = build_recognizer(
+            x, labels, wrap_degrees(poses), args.components, unit_norm=unit_norm, label_names=objects
+        )
+    except ValueError as exc:
+        if "exceeds the rank" not in str(exc):
+            raise
+        # The cause is the -k the command line chose (or its default), not an internal argument.
+        raise ValueError(
+            f"-k/--components {args.components:g} is more than the {x.shape[0]} gallery views allow ({exc}): "
+            "give a smaller -k, or more views (a smaller --synth step, more objects)"
+        ) from exc
     if args.reject_rate is not None:
         import torch
 

@@ -26,6 +26,7 @@ __all__ = [
     "background_arg",
     "background_fields",
     "background_model",
+    "check_not_views",
     "label_table",
     "load_manifest",
     "load_model",
@@ -123,6 +124,27 @@ def background_model(prep: Preprocessing) -> BackgroundModel | None:
 def manifest_inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:
     """The input files of the manifest options (an output must not overwrite one)."""
     return [("--manifest", args.manifest), ("--root", args.root)]
+
+
+def check_not_views(outputs: list[tuple[str, str | None]], manifest: ViewManifest) -> None:
+    """Refuses an output that is one of the manifest's image or mask files (before any work:
+    :func:`~torch_eigview.files.check_outputs` knows only the manifest itself).
+
+    Raises:
+        ValueError: naming the flag, the file and the manifest line that lists it.
+    """
+    import os
+
+    given = [(flag, os.path.realpath(path)) for flag, path in outputs if path]
+    given = [(flag, target) for flag, target in given if os.path.exists(target)]  # a new file is no input
+    for entry in manifest if given else ():
+        for what, file in (("image", entry.path), ("mask", entry.mask)):
+            for flag, target in given:
+                if file is not None and os.path.realpath(file) == target:
+                    raise ValueError(
+                        f"{flag}={target!r} is the {what} of {entry.source}: writing it would destroy an "
+                        "input; give another output path"
+                    )
 
 
 def load_manifest(args: argparse.Namespace, skipped: list[str] | None = None) -> ViewManifest:

@@ -85,6 +85,8 @@ def set_background(images: torch.Tensor, masks: torch.Tensor, value: float = 0.0
     images = _check_images(images)
     masks = check_masks(masks, images)
     value = check_number(value, "value")
+    if not math.isfinite(value):
+        raise ValueError(f"value={value!r} must be a finite intensity")
     return torch.where(masks, images, images.new_tensor(value))
 
 

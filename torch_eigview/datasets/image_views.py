@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 from torch.utils.data import Dataset
 
-from torch_eigview.check import check_int
+from torch_eigview.check import SIDE_LIMIT, check_int, check_limit
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.manifest import ViewManifest
 from torch_eigview.io.foreground import colour_in_channels
@@ -34,7 +34,15 @@ def _check_size(size: object) -> tuple[int, int] | None:
         return None
     if not isinstance(size, Sequence) or isinstance(size, str) or len(size) != 2:
         raise TypeError(f"size must be None or a pair (H, W) of ints, got {size!r}")
-    return check_int(size[0], "size[0] (H)", minimum=1), check_int(size[1], "size[1] (W)", minimum=1)
+    hw = check_int(size[0], "size[0] (H)", minimum=1), check_int(size[1], "size[1] (W)", minimum=1)
+    check_limit(max(hw), "size", "pixels per image side", *SIDE_LIMIT)  # a view is H x W floats in memory
+    return hw
+
+
+def _check_channels(channels: object) -> int | None:
+    if channels is not None and check_int(channels, "channels") not in (1, 3):
+        raise ValueError(f"channels must be 1, 3 or None, got {channels}")
+    return channels  # type: ignore[return-value]
 
 
 def _resize(
@@ -71,7 +79,9 @@ class ViewDataset(Dataset[dict[str, Any]]):
     Args:
         manifest: The views.
         size: ``(H, W)`` every image and mask is resized to, or None to keep each file's
-            size (then a ``DataLoader`` batch needs files of one size).
+            size (then a ``DataLoader`` batch needs files of one size); each side at most
+            :data:`~torch_eigview.check.SIDE_LIMIT` (512; the environment variable
+            ``EIGVIEW_MAX_IMAGE_SIDE`` raises it).
         channels: ``1`` (RGB to gray with the BT.709 weights), ``3`` (gray repeated) or
             None to keep each file's channels.
         dtype: Floating dtype of the images.
@@ -104,8 +114,7 @@ class ViewDataset(Dataset[dict[str, Any]]):
             raise TypeError(f"manifest must be a ViewManifest, got {type(manifest).__name__}")
         if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
             raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
-        if channels is not None and check_int(channels, "channels") not in (1, 3):
-            raise ValueError(f"channels must be 1, 3 or None, got {channels}")
+        _check_channels(channels)
         if background is not None and not isinstance(background, BackgroundModel):
             raise TypeError(f"background must be a BackgroundModel or None, got {type(background).__name__}")
         self.background = background
@@ -124,6 +133,8 @@ class ViewDataset(Dataset[dict[str, Any]]):
         )
 
     def __getitem__(self, index: int) -> dict[str, Any]:
+        if not -len(self) <= index < len(self):  # IndexError: the end of iteration for a Dataset
+            raise IndexError(f"index={index} is out of range for {len(self)} views")
         entry = self.manifest[index]
         image, mask = read_view(
             entry.path,
@@ -174,12 +185,13 @@ def read_view(
             colour leaves no object; the message names ``source`` and the files.
     """
     hw = _check_size(size)
+    _check_channels(channels)
     try:
         arr = read_image(path, keep_alpha=True)
         alpha = arr[-1:] if arr.shape[0] in (2, 4) else None
         colour = arr[:-1] if alpha is not None else arr
         if mask is not None:
-            found = read_image(mask).any(axis=0, keepdims=True)
+            found = read_image(mask, what="mask").any(axis=0, keepdims=True)
             if found.shape[1:] != colour.shape[1:]:
                 raise ValueError(
                     f"mask {mask} has size (H, W)={found.shape[1:]}, its image {path} "

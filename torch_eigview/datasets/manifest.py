@@ -33,6 +33,10 @@ _REQUIRED = ("path", "object", "azimuth")
 _FIELDS = ("object", "azimuth", "elevation")
 _NUMBER = r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
 _FIELD_RE = re.compile(r"\{([^{}]*)\}")
+# Degrees: past this an angle modulo 360 keeps no precision that means anything (float64
+# resolves 1e6 degrees to 1e-10); an unwrapped turntable angle of a few turns is far below it.
+_MAX_ANGLE = 1e6
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 
 @dataclass(frozen=True)
@@ -65,7 +69,8 @@ def _angle(text: str, column: str, where: str, lo: float | None = None, hi: floa
         raise ValueError(f"{where}: {column}={text!r} must be a number of degrees") from None
     if not math.isfinite(value):
         raise ValueError(f"{where}: {column}={text!r} must be a finite number of degrees")
-    if lo is not None and hi is not None and not lo <= value <= hi:
+    lo, hi = (-_MAX_ANGLE, _MAX_ANGLE) if lo is None or hi is None else (lo, hi)
+    if not lo <= value <= hi:
         raise ValueError(f"{where}: {column}={text!r} must lie in [{lo:g}, {hi:g}] degrees")
     return value
 
@@ -76,6 +81,8 @@ def _entry(
     """A checked entry: the files exist and are regular, the object is named, the angles are numbers."""
     if not obj.strip():
         raise ValueError(f"{where}: object must be a non-empty name, got {obj!r}")
+    if _CONTROL.search(obj):  # a newline or an ANSI escape would forge lines of a report
+        raise ValueError(f"{where}: object={obj!r} must not hold control characters")
     az = _angle(azimuth, "azimuth", where) % 360.0
     el = (
         math.nan
@@ -103,32 +110,60 @@ def _csv_entries(manifest: Path, skipped: list[str] | None = None) -> list[ViewE
         raise ValueError(f"manifest {manifest} cannot be read: {exc.strerror or exc}") from None
     with handle:
         reader = csv.reader(handle)
-        header = [h.strip() for h in next(reader, [])]
-        missing = [c for c in _REQUIRED if c not in header]
-        if missing:
-            raise ValueError(
-                f"{manifest} line 1: the header must hold the columns {', '.join(_REQUIRED)} "
-                f"(optional: elevation, mask), missing {missing}; got {header}"
-            )
-        col = {name: header.index(name) for name in (*_REQUIRED, "elevation", "mask") if name in header}
-        entries = []
-        for row in reader:
-            where = f"{manifest} line {reader.line_num}"
-            if not any(cell.strip() for cell in row):
-                continue  # blank lines separate groups in hand-written manifests
-            try:
-                entries.append(_row_entry(header, row, col, base, where))
-            except ValueError as exc:
-                if skipped is None:
-                    raise
-                skipped.append(str(exc))
+        try:
+            return _read_rows(reader, manifest, base, skipped)
+        except UnicodeDecodeError:
+            raise ValueError(_not_utf8(manifest)) from None
+        except csv.Error as exc:  # a field over csv's size limit, a NUL byte, a bad quote
+            raise ValueError(f"{manifest} line {reader.line_num}: cannot be parsed as CSV: {exc}") from None
+
+
+def _not_utf8(manifest: Path) -> str:
+    """The message for a manifest that is not UTF-8: the line and the first bad byte."""
+    data = manifest.read_bytes()
+    try:
+        data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        return f"{manifest} line {line}: is not UTF-8 text (byte 0x{data[exc.start]:02x}); save it as UTF-8"
+    return f"{manifest} changed while it was read"  # decoded in one piece, it is UTF-8
+
+
+def _read_rows(
+    reader: Iterator[list[str]], manifest: Path, base: Path, skipped: list[str] | None
+) -> list[ViewEntry]:
+    """The checked entries of a CSV reader's rows, the header first."""
+    header = [h.strip() for h in next(reader, [])]
+    missing = [c for c in _REQUIRED if c not in header]
+    if missing:
+        raise ValueError(
+            f"{manifest} line 1: the header must hold the columns {', '.join(_REQUIRED)} "
+            f"(optional: elevation, mask), missing {missing}; got {header}"
+        )
+    twice = sorted({h for h in header if h and header.count(h) > 1})
+    if twice:
+        raise ValueError(f"{manifest} line 1: the header names the column {twice[0]!r} twice; got {header}")
+    col = {name: header.index(name) for name in (*_REQUIRED, "elevation", "mask") if name in header}
+    entries = []
+    for row in reader:
+        where = f"{manifest} line {reader.line_num}"  # type: ignore[attr-defined]
+        if not any(cell.strip() for cell in row):
+            continue  # blank lines separate groups in hand-written manifests
+        try:
+            entries.append(_row_entry(header, row, col, base, where))
+        except ValueError as exc:
+            if skipped is None:
+                raise
+            skipped.append(str(exc))
     return entries
 
 
 def _row_entry(header: list[str], row: list[str], col: dict[str, int], base: Path, where: str) -> ViewEntry:
     """The checked entry of one CSV row."""
     if len(row) != len(header):
-        raise ValueError(f"{where}: has {len(row)} fields, the header {len(header)}")
+        spans = any("\n" in cell for cell in row)  # a quote that is never closed takes in the lines after it
+        hint = " (a quoted field runs on over several lines: is a quote left open?)" if spans else ""
+        raise ValueError(f"{where}: has {len(row)} fields, the header {len(header)}{hint}")
     cells = {name: row[i].strip() for name, i in col.items()}
     if not cells["path"]:
         raise ValueError(f"{where}: path must name an image file, got an empty field")
@@ -210,6 +245,9 @@ class ViewManifest:
         self, entries: Sequence[ViewEntry], name: str = "manifest", *, skipped: list[str] | None = None
     ) -> None:
         entries = list(entries)
+        if not entries and skipped:  # the cause is the bad lines, not an empty file
+            more = f" (and {len(skipped) - 1} more bad line(s))" if len(skipped) > 1 else ""
+            raise ValueError(f"{name} lists no view, only bad lines: {skipped[0]}{more}")
         if not entries:
             raise ValueError(f"{name} lists no view")
         if not all(isinstance(e, ViewEntry) for e in entries):
@@ -249,6 +287,8 @@ class ViewManifest:
         """
         if not isinstance(path, (str, os.PathLike)):
             raise TypeError(f"path must be a str or a path, got {type(path).__name__}")
+        if skipped is not None and not isinstance(skipped, list):
+            raise TypeError(f"skipped must be a list or None, got {type(skipped).__name__}")
         manifest = Path(path)
         check_regular_file(manifest, "manifest")
         return cls(_csv_entries(manifest, skipped), name=str(manifest), skipped=skipped)

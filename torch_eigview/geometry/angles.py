@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
+
+from torch_eigview.check import VIEW_LIMIT, check_limit
 
 __all__ = ["angle_range", "wrap_degrees"]
 
@@ -21,15 +25,21 @@ def angle_range(start: float, stop: float, step: float, name: str) -> list[float
     """``start, start + step, …, stop`` (inclusive), validated.
 
     Raises:
-        ValueError: ``step`` is not positive, or ``stop < start``; the message names ``name``.
+        ValueError: ``step`` is not positive, ``stop < start``, or the range holds more
+            angles than the view limit (:data:`~torch_eigview.check.VIEW_LIMIT`, checked
+            before the list is made: a tiny step would otherwise fill the memory); the
+            message names ``name``.
 
     Example:
         >>> angle_range(-10.0, 10.0, 5.0, "test")
         [-10.0, -5.0, 0.0, 5.0, 10.0]
     """
+    if not all(math.isfinite(v) for v in (start, stop, step)):
+        raise ValueError(f"{name} must be finite numbers, got start={start}, stop={stop}, step={step}")
     if not step > 0:
         raise ValueError(f"{name} step must be positive, got {step}")
     if stop < start:
         raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
+    check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
     n = int((stop - start) / step + 1e-9) + 1
     return [start + i * step for i in range(n)]

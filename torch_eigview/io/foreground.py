@@ -157,7 +157,12 @@ def estimate_foreground(
         >>> int(estimate_foreground(x).sum())
         12
     """
+    if not isinstance(image, np.ndarray) or image.ndim != 3:
+        got = f"shape {image.shape}" if isinstance(image, np.ndarray) else type(image).__name__
+        raise ValueError(f"image must be (C, H, W) as a numpy array, got {got}")
     c, h, w = image.shape
+    if image.size and not np.isfinite(image).all():
+        raise ValueError(f"image must hold finite values, got NaN or infinite ones in {where}")
     if 2 * border >= min(h, w):
         raise ValueError(f"border={border} must be less than half the image side min(H, W)={min(h, w)}")
     if background is not None and len(background) != c:

@@ -69,7 +69,7 @@ def _n_frames(path: str | os.PathLike[str]) -> int:
         return 1
 
 
-def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False) -> np.ndarray:
+def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False, what: str = "image") -> np.ndarray:
     """Reads one file as a checked ``(C, H, W)`` array of its own dtype (alpha dropped).
 
     With ``keep_alpha=True`` an alpha channel is kept as the last channel (gray+alpha gives
@@ -77,11 +77,13 @@ def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False) -> np.
     (:func:`check_regular_file`); a multi-page TIFF or an animated image is refused rather
     than read as its first page, and float pixels must lie in ``[0, 1]``.
 
+    ``what`` names the file in the errors of :func:`check_regular_file` (``"mask"``).
+
     Raises:
         ValueError: a special file, a file that cannot be decoded, several pages, a layout
             or dtype that is not an image's, or float pixels outside ``[0, 1]``.
     """
-    check_regular_file(path)
+    check_regular_file(path, what)
     try:
         frames = _n_frames(path)
         arr = np.asarray(skimage.io.imread(path))

@@ -204,8 +204,14 @@ def prepare_array(image: np.ndarray, prep: Preprocessing, mask: np.ndarray | Non
         ValueError: ``image`` is not ``(C, H, W)`` with C 1 or 3, ``mask`` has another
             size, the mask is all background or the background leaves no object.
     """
+    if not isinstance(prep, Preprocessing):
+        raise TypeError(f"prep must be a Preprocessing, got {type(prep).__name__}")
     if image.ndim != 3 or image.shape[0] not in (1, 3):
         raise ValueError(f"image must be (C, H, W) with C 1 or 3, got shape {image.shape}")
+    if image.size and not (np.isfinite(image).all() and 0.0 <= image.min() and image.max() <= 1.0):
+        raise ValueError(
+            f"image must hold finite values in [0, 1], got min={image.min()!r}, max={image.max()!r}"
+        )
     if mask is not None and mask.shape != image.shape[1:]:
         raise ValueError(f"mask must have the image's size (H, W)={image.shape[1:]}, got {mask.shape}")
     work = image.astype(np.float32, copy=False)

@@ -54,6 +54,23 @@ def distance_resolution(codes: torch.Tensor) -> float:
     return math.sqrt(8 * torch.finfo(codes.dtype).eps) * scale
 
 
+def _check_views(recognizer: NearestNeighborRecognizer, views: object) -> None:
+    """Held-out views: a non-empty float batch of the gallery's view size (named ``views``)."""
+    views = check_float_tensor(views, "views")
+    check_ndim(views, "views", (2, 4), "(B, N) or (B, C, H, W)")
+    if views.shape[0] == 0:
+        raise ValueError("views must hold at least one held-out view to calibrate on, got B=0")
+    proj = recognizer.projection
+    shape = getattr(proj, "image_shape", None)
+    if views[0].numel() != proj.in_features or (
+        views.ndim == 4 and shape is not None and views.shape[1:] != shape
+    ):
+        raise ValueError(
+            f"views must have shape (B, {proj.in_features}) or (B, *{tuple(shape or ())}) like the "
+            f"recognizer's gallery, got {tuple(views.shape)}"
+        )
+
+
 def calibrate_rejection(
     recognizer: NearestNeighborRecognizer,
     views: torch.Tensor,
@@ -97,10 +114,7 @@ def calibrate_rejection(
         raise TypeError(f"recognizer must be a NearestNeighborRecognizer, got {type(recognizer).__name__}")
     rate = check_reject_rate(reject_rate)
     check_choice(score, "score", REJECT_SCORES)
-    check_float_tensor(views, "views")
-    check_ndim(views, "views", (2, 4), "(B, N) or (B, C, H, W)")
-    if views.shape[0] == 0:
-        raise ValueError("views must hold at least one held-out view to calibrate on, got B=0")
+    _check_views(recognizer, views)
     if score != "difs" and not hasattr(recognizer.projection, "mean"):
         raise ValueError(
             f"score={score!r} needs the distance from feature space of a linear eigenspace; this "

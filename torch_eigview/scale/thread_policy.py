@@ -34,7 +34,7 @@ from pathlib import Path
 
 import torch
 
-from torch_eigview.check import check_int, check_positive
+from torch_eigview.check import check_int, check_limit, check_positive
 
 __all__ = [
     "PRODUCT_FLOPS",
@@ -55,6 +55,10 @@ THREADS_DEFAULT = 1
 PRODUCT_FLOPS = 1e11
 
 # True inside threads(None), the commands' policy; an explicit count turns it off.
+#: Threads one ``threads(n)`` may ask for (the environment variable that raises it, the limit).
+_THREAD_LIMIT = ("EIGVIEW_MAX_THREADS", 1024)
+#: Seconds :func:`idle_cpus` may sample for.
+_MAX_INTERVAL = 60.0
 _POLICY: ContextVar[bool] = ContextVar("torch_eigview_thread_policy", default=False)
 
 
@@ -68,7 +72,9 @@ def resolve_threads(n: int | None) -> int:
     """``n`` checked (an int >= 1), or :func:`default_threads` for None."""
     if n is None:
         return default_threads()
-    return check_int(n, "threads", minimum=1)
+    count = check_int(n, "threads", minimum=1)
+    check_limit(count, "threads", "threads", *_THREAD_LIMIT)  # each one a stack and a pool slot
+    return count
 
 
 def _allowed_cpus() -> list[int]:
@@ -109,6 +115,12 @@ def idle_cpus(interval: float = 0.1, *, stat: str | os.PathLike[str] = "/proc/st
         A float in [0, number of allowed CPUs].
     """
     check_positive(interval, "interval")
+    if interval > _MAX_INTERVAL:
+        raise ValueError(
+            f"interval={interval!r} must be at most {_MAX_INTERVAL:g} seconds (a sample, not a wait)"
+        )
+    if os.path.exists(stat) and not os.path.isfile(stat):  # a FIFO would block the read forever
+        raise ValueError(f"stat={os.fspath(stat)!r} must be a regular file (the kernel's /proc/stat)")
     cpus = _allowed_cpus()
     first = _idle_ticks(Path(stat), cpus)
     if first is None:
@@ -152,6 +164,7 @@ def for_products(flops: float) -> Iterator[int]:
         ...     n
         1
     """
+    check_positive(flops, "flops", allow_zero=True)
     if not _POLICY.get() or flops < PRODUCT_FLOPS:
         yield torch.get_num_threads()
         return

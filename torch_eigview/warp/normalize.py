@@ -44,7 +44,9 @@ def foreground_mask(images: torch.Tensor, threshold: float = 0.05) -> torch.Tens
     return images.mean(dim=-3) > threshold
 
 
-def seed_foreground(seeds: torch.Tensor, masks: object, threshold: float) -> torch.Tensor:
+def seed_foreground(
+    seeds: torch.Tensor, masks: object, threshold: float, *, require_object: bool = False
+) -> torch.Tensor:
     """The foreground of each seed view: its mask when given, else :func:`foreground_mask`.
 
     A mask from a segmentation or a background model decides where a brightness
@@ -55,13 +57,16 @@ def seed_foreground(seeds: torch.Tensor, masks: object, threshold: float) -> tor
         seeds: (V, C, H, W) seed views.
         masks: None, or (V, H, W) bool masks, True on the object.
         threshold: intensity above which a pixel is foreground when ``masks`` is None.
+        require_object: refuse a given mask without an object pixel (the warp would make
+            views of nothing, silently).
 
     Returns:
         (V, H, W) bool.
 
     Raises:
         TypeError: ``masks`` is not a bool tensor.
-        ValueError: ``masks`` does not have shape (V, H, W).
+        ValueError: ``masks`` does not have shape (V, H, W), or (``require_object``) one
+            is all background.
     """
     if masks is None:
         return foreground_mask(seeds, threshold)
@@ -71,6 +76,11 @@ def seed_foreground(seeds: torch.Tensor, masks: object, threshold: float) -> tor
     if tuple(masks.shape) != want:
         raise ValueError(
             f"masks must have shape (V, H, W) = {want} to match the seeds, got {tuple(masks.shape)}"
+        )
+    empty = (~masks.flatten(1).any(1)).nonzero().flatten().tolist() if require_object else []
+    if empty:
+        raise ValueError(
+            f"masks[{empty[0]}] is all background (no True pixel): a seed view must show its object"
         )
     return masks.to(seeds.device)
 
@@ -116,6 +126,10 @@ def resolve_extent(extent: bool | str, masks: torch.Tensor) -> bool:
     Returns:
         A bool.
     """
+    if extent != "auto" and not isinstance(extent, bool):
+        raise ValueError(f"extent must be True, False or 'auto', got {extent!r}")
+    if not isinstance(masks, torch.Tensor) or masks.dtype != torch.bool:
+        raise TypeError(f"masks must be a bool tensor (True on the object), got {masks!r:.80}")
     if extent != "auto":
         return bool(extent)
     return bool((box_fill(masks) >= FILLED_FRAME).all())
