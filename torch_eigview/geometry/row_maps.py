@@ -21,6 +21,8 @@ def invert_row_map(
     valid: torch.Tensor,
     depth: torch.Tensor | None,
     max_stretch: float = math.inf,
+    *,
+    fallback: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Inverts a forward map along rows: the source column sampled by each target pixel.
 
@@ -39,10 +41,12 @@ def invert_row_map(
         valid: (B, H, W) or (B, T, H, W) bool, source pixels with a trusted correspondence.
         depth: (B, T, H, W) depth towards the novel camera, or None (ties: largest source x).
         max_stretch: longest segment (target pixels) still taken as one surface.
+        fallback: map broadcastable to (B, T, H, W), or None. Given, the holes are filled
+            at once (:func:`fill_row_holes` with it), which spares a pass writing NaN.
 
     Returns:
         ``(src_x_for_dst, hit)``, (B, T, H, W) each; ``src_x_for_dst`` is NaN where
-        ``hit`` is False.
+        ``hit`` is False, or, with ``fallback``, filled there.
     """
     b, t, h, w = dst_x_for_src.shape
     dtype, device = dst_x_for_src.dtype, dst_x_for_src.device
@@ -51,9 +55,14 @@ def invert_row_map(
     length = f1 - f0
     valid = valid[:, None] if valid.ndim == 3 else valid
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
-    if w < 2 or not bool(seg_ok.any()):
-        return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
-    parts = _segment_columns(dst_x_for_src, depth, seg_ok)
+    n_seg = int(seg_ok.count_nonzero())
+    if n_seg == 0:
+        src, hit = (
+            torch.full((b, t, h, w), math.nan, dtype=dtype, device=device),
+            seg_ok.new_zeros(b, t, h, w),
+        )
+        return (src, hit) if fallback is None else (fill_row_holes(src, hit, fallback), hit)
+    parts = _segment_columns(dst_x_for_src, depth, seg_ok, 2 * n_seg >= seg_ok.numel())
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
     # other, never concatenated.
@@ -64,12 +73,14 @@ def invert_row_map(
     for idx, key, src in parts:
         win = key >= best.index_select(0, idx)
         out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax")
-    hit = best[:n] != -math.inf
-    return torch.where(hit, out[:n], math.nan).view(b, t, h, w), hit.view(b, t, h, w)
+    hit = (best[:n] != -math.inf).view(b, t, h, w)
+    if fallback is not None:  # the fill reads the hits' columns only, never the holes' -inf
+        return fill_row_holes(out[:n].view(b, t, h, w), hit, fallback), hit
+    return torch.where(hit, out[:n].view(b, t, h, w), math.nan), hit
 
 
 def _segment_columns(
-    dst: torch.Tensor, depth: torch.Tensor | None, seg_ok: torch.Tensor
+    dst: torch.Tensor, depth: torch.Tensor | None, seg_ok: torch.Tensor, dense: bool
 ) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
@@ -84,6 +95,7 @@ def _segment_columns(
     Args:
         dst: (B, T, H, W) forward map; ``depth`` the same shape or None.
         seg_ok: (B, T, H, W - 1) bool, the segments to rasterize.
+        dense: whether at least half of them pass (slot 0 on views of the whole map).
 
     Returns:
         One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel in
@@ -92,7 +104,6 @@ def _segment_columns(
     b, t, h, w = dst.shape
     dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
     fields = [dst] if depth is None else [dst, depth]
-    dense = 2 * int(seg_ok.sum()) >= seg_ok.numel()
     if dense:
         ends = [(v[..., :-1], v[..., 1:]) for v in fields]
         k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
@@ -108,16 +119,21 @@ def _segment_columns(
         k = k_int.to(dtype)
     # A non-finite end (map or depth) is no surface: checked on the whole map when most
     # segments pass, on the gathered ends otherwise.
+    ok: torch.Tensor | None
     if dense:
         finite = _all_finite(fields)
         ok = seg_ok & finite[..., :-1] & finite[..., 1:]
     else:
-        ok = _all_finite([v for pair in ends for v in pair])
+        gathered = [v for pair in ends for v in pair]
+        # A finite sum of the ends proves every end finite (a NaN or an infinity would
+        # carry into it), which spares the elementwise test in the common case.
+        ok = None if _sum_is_finite(gathered) else _all_finite(gathered)
     (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
     length = f1 - f0
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.floor(f1).clamp(max=w - 1) - col0
-    room = torch.where(ok, room, -1.0)
+    if ok is not None:
+        room = torch.where(ok, room, -1.0)
     ok0 = room >= 0
     src0, key0 = _interpolate((col0 - f0) / length, k, dd)
     idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
@@ -143,6 +159,15 @@ def _segment_columns(
         m += 1
         cand = cand[flat[3].index_select(0, cand) >= m]
     return parts
+
+
+def _sum_is_finite(values: list[torch.Tensor]) -> bool:
+    """Whether the sum of all elements of ``values`` is finite (then each of them is; an
+    overflow of the sum only sends the caller to the elementwise test)."""
+    total = values[0].sum()
+    for v in values[1:]:
+        total += v.sum()
+    return math.isfinite(float(total))
 
 
 def _all_finite(values: list[torch.Tensor]) -> torch.Tensor:
@@ -185,26 +210,36 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
         (..., W) the map with its holes filled (a new tensor).
     """
     shape, w = src.shape, src.shape[-1]
-    n_holes = int((~hit).sum())
+    n_holes = hit.numel() - int(hit.count_nonzero())
     if n_holes == 0:
         return src.clone()
     if 2 * n_holes < hit.numel():
         return _fill_holes_only(src, hit, fallback)
-    dtype, device = src.dtype, src.device
     src_rows, hit_rows = src.reshape(-1, w), hit.reshape(-1, w)
-    fb = fallback.expand(shape).reshape(-1, w)  # a view where fallback is an expanded row
-    cols = torch.arange(w, dtype=dtype, device=device)
-    # First and last hit of each row as maxima over the row (w and -1 for a row without one).
-    hitf = hit_rows.to(dtype)
-    first = w - (hitf * (w - cols)).amax(dim=-1, keepdim=True)
-    last = (hitf * (cols + 1)).amax(dim=-1, keepdim=True) - 1
-    has_hit = last >= 0
-    ends = torch.cat([first, last], dim=1).clamp(0, w - 1).long()
+    # First and last hit of each row (argmax finds the first maximum); 0 and W - 1 on a
+    # row without one, whose shifts are 0.
+    as_byte = hit_rows.view(torch.uint8)
+    first = as_byte.argmax(dim=-1, keepdim=True)
+    last = (w - 1) - as_byte.flip(-1).argmax(dim=-1, keepdim=True)
+    ends = torch.cat([first, last], dim=1)
     # The exterior's shift, map minus fallback at the nearest hit; 0 on a row without hits.
-    shift = torch.where(has_hit, src_rows.gather(1, ends) - fb.gather(1, ends), 0.0)
-    out = fb + (first - cols).clamp_(0, 1).mul_(shift[:, :1])
-    out += (cols - last).clamp_(0, 1).mul_(shift[:, 1:])
-    _fill_interior(out.view(-1), src_rows, hit_rows, first, last)
+    fb_ends = fallback.expand(shape).gather(-1, ends.view(*shape[:-1], 2)).view(-1, 2)
+    has_hit = hit_rows.gather(1, first)
+    shift = torch.where(has_hit, src_rows.gather(1, ends) - fb_ends, 0.0)
+    cols = torch.arange(w, device=src.device)
+    left, right = cols < first, cols > last
+    exterior = torch.where(left, shift[:, :1], torch.where(right, shift[:, 1:], 0.0)).view(shape)
+    out = torch.where(hit, src, fallback + exterior).view(-1, w)
+    # Holes between two hits interpolate: only the rows that have one are scanned.
+    inner_hole = ~(hit_rows | left | right)
+    rows = (inner_hole.any(dim=1) & has_hit[:, 0]).nonzero().squeeze(1)
+    if rows.numel():
+        part = out.index_select(0, rows)
+        firstf, lastf = (v.index_select(0, rows).to(src.dtype) for v in (first, last))
+        _fill_interior(
+            part.view(-1), src_rows.index_select(0, rows), hit_rows.index_select(0, rows), firstf, lastf
+        )
+        out.index_copy_(0, rows, part)
     return out.view(shape)
 
 

@@ -223,15 +223,16 @@ def _sample_views(views: torch.Tensor, src_x: torch.Tensor, src_y: torch.Tensor 
     ox, oy = (0.0 if w == 1 else 1.0), (0.0 if h == 1 else 1.0)
     ys = torch.arange(h, dtype=dtype, device=device).view(h, 1) if src_y is None else src_y.to(dtype)
     xs = src_x.to(dtype)
-    if torch.is_grad_enabled() and (xs.requires_grad or ys.requires_grad):
-        grid = torch.stack([xs * fx - ox, (ys * fy - oy).expand_as(xs)], dim=-1)
+    gy = ys * fy - oy
+    if dtype in (torch.float32, torch.float64) and not (
+        torch.is_grad_enabled() and (xs.requires_grad or gy.requires_grad)
+    ):
+        gx = torch.mul(xs, fx).sub_(ox)
+        # (x, y) pairs interleaved by a complex tensor: one contiguous pass, where writing
+        # each half of the grid in place is a strided pass each and several times slower.
+        grid = torch.view_as_real(torch.complex(gx, gy.expand_as(gx)))
     else:
-        grid = views.new_empty(s, b, t, h, w, 2)
-        torch.mul(xs, fx, out=grid[..., 0]).sub_(ox)
-        if src_y is None:
-            grid[..., 1] = ys * fy - oy
-        else:
-            torch.mul(ys, fy, out=grid[..., 1]).sub_(oy)
+        grid = torch.stack([xs * fx - ox, gy.expand_as(xs)], dim=-1)
     out = F.grid_sample(
         views.reshape(s * b, c, h, w),
         grid.view(s * b, t * h, w, 2),

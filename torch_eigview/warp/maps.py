@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from torch_eigview.geometry.correspondence import Correspondence
-from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.geometry.row_maps import invert_row_map
 
 __all__ = ["RowGeometry", "WarpMaps"]
 
@@ -189,19 +189,22 @@ class RowGeometry:
         """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
         in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
         c, al, th = self.c, self.alpha, self.theta
-        big_x = (x1 - c)[:, None]
-        big_z = ((x2 - c)[:, None] - big_x * math.cos(al)) / math.sin(al)
-        dst_x_for_src = c + self.a * (x1 - c)[:, None] + self.b * (x2 - c)[:, None]
+        big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
+        big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
+        dst_x_for_src = c + self.a * big_x + self.b * x2c
         depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
         # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
         # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
         other = self.a if second else self.b
-        base_valid, valid = valid, valid[:, None] | (other == 0)
-        src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch)
+        own = other == 0
+        base_valid = valid
+        if bool(own.any()):
+            valid = valid[:, None] | own
         # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
         scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
         cols = torch.arange(x1.shape[-1], dtype=x1.dtype, device=x1.device)
-        src_x = fill_row_holes(src_x, hit, (c + (cols - c) * scale).expand_as(src_x))
+        fallback = (c + (cols - c) * scale).expand_as(dst_x_for_src)
+        src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch, fallback=fallback)
         if self.tilt == 0.0:
             return src_x, None, hit
         # The 2D displacement (dst_x - grid, dy) is linear in the grid's centred column G and
@@ -217,7 +220,7 @@ class RowGeometry:
             -self.tilt * (dcos * z_d / math.sin(al) - dsin * x_d),
         )
         disparity = x1 - x2 if second else x2 - x1
-        return _refine_2d(src_x, disparity, coef, c, base_valid, other == 0)
+        return _refine_2d(src_x, disparity, coef, c, base_valid, own)
 
     def maps(
         self,
@@ -251,8 +254,9 @@ class RowGeometry:
         # Where both views see a pixel the nearer one in angle weighs more; where one is
         # occluded the other is used alone; where neither sees it, the angular weights.
         both, neither = hit1 & hit2, ~hit1 & ~hit2
-        w1 = torch.where(both | neither, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype))
+        # Written in place: the stacked weights need no copies of the two halves.
+        weight = src1.new_empty((2, *src1.shape))
+        torch.where(both | neither, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype), out=weight[0])
+        torch.sub(1, weight[0], out=weight[1])
         src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
-        return WarpMaps(
-            torch.stack([src1, src2]), torch.stack([w1, 1 - w1]), torch.stack([hit1, hit2]), thetas, src_y
-        )
+        return WarpMaps(torch.stack([src1, src2]), weight, torch.stack([hit1, hit2]), thetas, src_y)
