@@ -10,10 +10,11 @@ The orthographic camera rotating about the vertical axis moves pixels along thei
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 
-__all__ = ["fill_row_holes", "invert_row_map"]
+__all__ = ["fill_row_holes", "invert_row_map", "invert_row_segments"]
 
 
 def invert_row_map(
@@ -50,19 +51,81 @@ def invert_row_map(
     """
     b, t, h, w = dst_x_for_src.shape
     dtype, device = dst_x_for_src.dtype, dst_x_for_src.device
-    n = b * t * h * w
     f0, f1 = dst_x_for_src[..., :-1], dst_x_for_src[..., 1:]
     length = f1 - f0
     valid = valid[:, None] if valid.ndim == 3 else valid
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
     n_seg = int(seg_ok.count_nonzero())
-    if n_seg == 0:
-        src, hit = (
-            torch.full((b, t, h, w), math.nan, dtype=dtype, device=device),
-            seg_ok.new_zeros(b, t, h, w),
-        )
-        return (src, hit) if fallback is None else (fill_row_holes(src, hit, fallback), hit)
-    parts = _segment_columns(dst_x_for_src, depth, seg_ok, 2 * n_seg >= seg_ok.numel())
+    fields = [dst_x_for_src] if depth is None else [dst_x_for_src, depth]
+    parts: Parts = []
+    if n_seg and 2 * n_seg >= seg_ok.numel():
+        parts = _dense_columns(fields, seg_ok)
+    elif n_seg:
+        # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
+        row, k = seg_ok.reshape(-1, w - 1).nonzero().unbind(1)
+        left = row * w + k  # source pixel k of the segment, flat in (B, T, H, W)
+        ends = [
+            (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
+        ]
+        parts = _sparse_columns(row, k, ends, None, w, b * t * h * w)
+    return _z_buffer(parts, (b, t, h, w), dtype, device, fallback)
+
+
+def invert_row_segments(
+    row: torch.Tensor,
+    k: torch.Tensor,
+    dst_ends: tuple[torch.Tensor, torch.Tensor],
+    depth_ends: tuple[torch.Tensor, torch.Tensor] | None,
+    shape: tuple[int, int, int, int],
+    max_stretch: float = math.inf,
+    *,
+    fallback: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`invert_row_map` given its candidate segments alone, for a map that is mostly
+    background: the caller evaluates the forward map at the ends of the segments whose two
+    source pixels are valid, never on the whole grid.
+
+    The same segments pass (order kept, at most ``max_stretch`` long, finite ends), and
+    the result equals :func:`invert_row_map`'s on the full maps bit for bit.
+
+    Args:
+        row: (P,) int64 row of each segment in the B·T·H rows of ``shape``.
+        k: (P,) int64 its left source column (the right one is k + 1).
+        dst_ends: ``(f0, f1)``, each (P,), the forward map at columns k and k + 1.
+        depth_ends: ``(d0, d1)``, each (P,), the depth there, or None.
+        shape: ``(B, T, H, W)`` of the maps.
+        max_stretch: longest segment (target pixels) still taken as one surface.
+        fallback: as :func:`invert_row_map`'s.
+
+    Returns:
+        ``(src_x_for_dst, hit)``, (B, T, H, W) each, as :func:`invert_row_map` returns them.
+    """
+    f0, f1 = dst_ends
+    sizes = {tuple(v.shape) for v in (row, k, f0, f1, *(depth_ends or ()))}
+    if len(sizes) != 1 or len(next(iter(sizes))) != 1:
+        raise ValueError(f"row, k and the ends must all have one shape (P,), got shapes {sorted(sizes)}")
+    if len(shape) != 4:
+        raise ValueError(f"shape must be (B, T, H, W), got {tuple(shape)}")
+    length = f1 - f0
+    keep = (length > 0) & (length <= max_stretch)
+    ends = [dst_ends] if depth_ends is None else [dst_ends, depth_ends]
+    parts = _sparse_columns(row, k, ends, keep, shape[-1], math.prod(shape))
+    return _z_buffer(parts, tuple(shape), f0.dtype, f0.device, fallback)
+
+
+Parts = list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]
+
+
+def _z_buffer(
+    parts: Parts,
+    shape: tuple[int, ...],
+    dtype: torch.dtype,
+    device: torch.device,
+    fallback: torch.Tensor | None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The winner of each target pixel among the ``parts`` of :func:`_columns`: its source
+    column (NaN, or ``fallback`` filled, where none covers it) and the hit mask, ``shape`` each."""
+    n = math.prod(shape)
     # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
     # other, never concatenated.
@@ -73,62 +136,88 @@ def invert_row_map(
     for idx, key, src in parts:
         win = key >= best.index_select(0, idx)
         out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax")
-    hit = (best[:n] != -math.inf).view(b, t, h, w)
+    hit = (best[:n] != -math.inf).view(shape)
     if fallback is not None:  # the fill reads the hits' columns only, never the holes' -inf
-        return fill_row_holes(out[:n].view(b, t, h, w), hit, fallback), hit
-    return torch.where(hit, out[:n].view(b, t, h, w), math.nan), hit
+        return fill_row_holes(out[:n].view(shape), hit, fallback), hit
+    return torch.where(hit, out[:n].view(shape), math.nan), hit
 
 
-def _segment_columns(
-    dst: torch.Tensor, depth: torch.Tensor | None, seg_ok: torch.Tensor, dense: bool
-) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+def _dense_columns(fields: list[torch.Tensor], seg_ok: torch.Tensor) -> Parts:
+    """:func:`_columns` when most segments pass (a view's object fills it): slot 0 on views
+    of the whole map, a refused segment sending key -inf to a spare pixel."""
+    b, t, h, w = fields[0].shape
+    dtype, device, w1 = fields[0].dtype, fields[0].device, w - 1
+    ends = [(v[..., :-1], v[..., 1:]) for v in fields]
+    k = torch.arange(w1, dtype=dtype, device=device)
+    row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
+    # A non-finite end (map or depth) is no surface.
+    finite = _all_finite(fields)
+    ok = seg_ok & finite[..., :-1] & finite[..., 1:]
+
+    def locate(cand: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return (cand % w1).to(dtype), (cand // w1) * w
+
+    return _columns(ends, k, row_start, ok, w, fields[0].numel(), locate)
+
+
+def _sparse_columns(
+    row: torch.Tensor,
+    k_int: torch.Tensor,
+    ends: list[tuple[torch.Tensor, torch.Tensor]],
+    keep: torch.Tensor | None,
+    w: int,
+    n: int,
+) -> Parts:
+    """:func:`_columns` when few segments pass (a background around the object): only the
+    segments in (``row``, ``k_int``), their ``ends`` gathered; ``keep`` the ones that pass
+    the order and length tests (None: all); ``n`` the spare pixel, B·T·H·W."""
+    f0 = ends[0][0]
+    row_start = row * w
+    k = k_int.to(f0.dtype)
+    gathered = [v for pair in ends for v in pair]
+    # A finite sum of the ends proves every end finite (a NaN or an infinity would carry
+    # into it), which spares the elementwise test in the common case.
+    ok = None if _sum_is_finite(gathered) else _all_finite(gathered)
+    if keep is not None:
+        ok = keep if ok is None else ok & keep
+
+    def locate(cand: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return k.index_select(0, cand), row_start.index_select(0, cand)
+
+    return _columns(ends, k, row_start, ok, w, n, locate)
+
+
+def _columns(
+    ends: list[tuple[torch.Tensor, torch.Tensor]],
+    k: torch.Tensor,
+    row_start: torch.Tensor,
+    ok: torch.Tensor | None,
+    w: int,
+    n: int,
+    locate: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+) -> Parts:
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
     Segment k of a row (source pixels k, k + 1) starts at target column ``f0 = dst[k]``
     and ends at ``f1 = dst[k + 1]``; it covers the integer columns ``col0 + m`` inside the
-    image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``. When most segments
-    pass (a view's object fills it) slot 0 is computed for all of them on views of the
-    map, a refused one sending key -inf to a spare pixel; when few do (a background around
-    the object) only those are gathered. Slots m >= 1 gather the few segments that reach
-    them (views foreshorten).
+    image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``. Slot 0 takes every
+    segment (a refused one, ``ok`` False, sends key -inf to the spare pixel ``n``); slots
+    m >= 1 gather the few segments that reach them (views foreshorten).
 
     Args:
-        dst: (B, T, H, W) forward map; ``depth`` the same shape or None.
-        seg_ok: (B, T, H, W - 1) bool, the segments to rasterize.
-        dense: whether at least half of them pass (slot 0 on views of the whole map).
+        ends: ``(f0, f1)`` of the map and, optionally, ``(d0, d1)`` of the depth, each
+            over the segments (any shape, the shape of ``k`` broadcast with ``row_start``).
+        k: the segments' left source column (float); ``row_start`` their row's first
+            flat pixel in B·T·H·W.
+        ok: bool, the segments that pass, or None (all).
+        w: the row length W; ``n``: the spare pixel, B·T·H·W.
+        locate: flat indices of the segments (``cand``) → their ``(k, row_start)``.
 
     Returns:
-        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel in
-        B·T·H·W (or the spare pixel B·T·H·W), the z-buffer key and the source column.
+        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel (or the
+        spare pixel), the z-buffer key and the source column.
     """
-    b, t, h, w = dst.shape
-    dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
-    fields = [dst] if depth is None else [dst, depth]
-    if dense:
-        ends = [(v[..., :-1], v[..., 1:]) for v in fields]
-        k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
-        row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
-    else:
-        # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
-        row, k_int = seg_ok.reshape(-1, w1).nonzero().unbind(1)
-        row_start = row * w
-        left = row_start + k_int  # source pixel k of the segment, flat in (B, T, H, W)
-        ends = [
-            (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
-        ]
-        k = k_int.to(dtype)
-    # A non-finite end (map or depth) is no surface: checked on the whole map when most
-    # segments pass, on the gathered ends otherwise.
-    ok: torch.Tensor | None
-    if dense:
-        finite = _all_finite(fields)
-        ok = seg_ok & finite[..., :-1] & finite[..., 1:]
-    else:
-        gathered = [v for pair in ends for v in pair]
-        # A finite sum of the ends proves every end finite (a NaN or an infinity would
-        # carry into it), which spares the elementwise test in the common case.
-        ok = None if _sum_is_finite(gathered) else _all_finite(gathered)
-    (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
+    (f0, f1), dd = ends[0], (ends[1] if len(ends) > 1 else None)
     length = f1 - f0
     col0 = torch.ceil(f0).clamp(min=0)
     room = torch.floor(f1).clamp(max=w - 1) - col0
@@ -145,10 +234,7 @@ def _segment_columns(
     while cand.numel():
         c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
         col = c0 + m
-        if dense:
-            lo, start = (cand % w1).to(dtype), (cand // w1) * w
-        else:
-            lo, start = k.index_select(0, cand), row_start.index_select(0, cand)
+        lo, start = locate(cand)
         sel = (
             None
             if flat_depth is None
@@ -216,23 +302,29 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     if 2 * n_holes < hit.numel():
         return _fill_holes_only(src, hit, fallback)
     src_rows, hit_rows = src.reshape(-1, w), hit.reshape(-1, w)
-    # First and last hit of each row (argmax finds the first maximum); 0 and W - 1 on a
-    # row without one, whose shifts are 0.
-    as_byte = hit_rows.view(torch.uint8)
-    first = as_byte.argmax(dim=-1, keepdim=True)
-    last = (w - 1) - as_byte.flip(-1).argmax(dim=-1, keepdim=True)
-    ends = torch.cat([first, last], dim=1)
+    # First and last hit of each row as maxima over the row, in a small integer type (W and
+    # -1 on a row without one, whose shifts are 0 and whose pixels are all exterior).
+    small = torch.int16 if w < 2**15 - 1 else torch.int64
+    as_int = hit_rows.to(small)
+    cols = torch.arange(w, dtype=small, device=src.device)
+    first = w - (as_int * (w - cols)).amax(dim=-1, keepdim=True)
+    last = (as_int * (cols + 1)).amax(dim=-1, keepdim=True) - 1
+    ends = torch.cat([first, last], dim=1).clamp(0, w - 1).long()
     # The exterior's shift, map minus fallback at the nearest hit; 0 on a row without hits.
     fb_ends = fallback.expand(shape).gather(-1, ends.view(*shape[:-1], 2)).view(-1, 2)
-    has_hit = hit_rows.gather(1, first)
-    shift = torch.where(has_hit, src_rows.gather(1, ends) - fb_ends, 0.0)
-    cols = torch.arange(w, device=src.device)
-    left, right = cols < first, cols > last
-    exterior = torch.where(left, shift[:, :1], torch.where(right, shift[:, 1:], 0.0)).view(shape)
+    shift = torch.where(last >= 0, src_rows.gather(1, ends) - fb_ends, 0.0)
+    # The shift of every pixel (s0 before the first hit, 0 inside, s1 after the last) as a
+    # running sum of its steps: s0 at column 0, -s0 at the first hit, s1 after the last.
+    # Each partial sum is s0, 0 or s1 exactly, and a scan costs less than per-pixel masks.
+    steps = src.new_zeros(src_rows.shape[0], w + 1)
+    steps[:, 0] = shift[:, 0]
+    steps.scatter_add_(1, ends[:, :1], -shift[:, :1])
+    steps.scatter_add_(1, ends[:, 1:] + 1, shift[:, 1:])
+    exterior = steps.cumsum(dim=1)[:, :w].view(shape)
     out = torch.where(hit, src, fallback + exterior).view(-1, w)
-    # Holes between two hits interpolate: only the rows that have one are scanned.
-    inner_hole = ~(hit_rows | left | right)
-    rows = (inner_hole.any(dim=1) & has_hit[:, 0]).nonzero().squeeze(1)
+    # Holes between two hits interpolate: only the rows that have one (fewer hits than
+    # columns from the first hit to the last) are scanned.
+    rows = (last - first + 1 > as_int.sum(dim=1, keepdim=True)).nonzero()[:, 0]
     if rows.numel():
         part = out.index_select(0, rows)
         firstf, lastf = (v.index_select(0, rows).to(src.dtype) for v in (first, last))

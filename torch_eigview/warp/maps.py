@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from torch_eigview.geometry.correspondence import Correspondence
-from torch_eigview.geometry.row_maps import invert_row_map
+from torch_eigview.geometry.row_maps import invert_row_map, invert_row_segments
 
 __all__ = ["RowGeometry", "WarpMaps"]
 
@@ -189,22 +189,25 @@ class RowGeometry:
         """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
         in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
         c, al, th = self.c, self.alpha, self.theta
-        big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
-        big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
-        dst_x_for_src = c + self.a * big_x + self.b * x2c
-        depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        b, h, w = x1.shape
         # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
         # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
         other = self.a if second else self.b
         own = other == 0
-        base_valid = valid
-        if bool(own.any()):
-            valid = valid[:, None] | own
         # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
         scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
-        cols = torch.arange(x1.shape[-1], dtype=x1.dtype, device=x1.device)
-        fallback = (c + (cols - c) * scale).expand_as(dst_x_for_src)
-        src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch, fallback=fallback)
+        cols = torch.arange(w, dtype=x1.dtype, device=x1.device)
+        fallback = (c + (cols - c) * scale).expand(b, th.shape[1], h, w)
+        inverse = None if bool(own.any()) else self._segment_inverse(x1, x2, valid, fallback)
+        if inverse is None:
+            big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
+            big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
+            dst_x_for_src = c + self.a * big_x + self.b * x2c
+            depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+            inverse = invert_row_map(
+                dst_x_for_src, valid[:, None] | own, depth, self.max_stretch, fallback=fallback
+            )
+        src_x, hit = inverse
         if self.tilt == 0.0:
             return src_x, None, hit
         # The 2D displacement (dst_x - grid, dy) is linear in the grid's centred column G and
@@ -220,7 +223,45 @@ class RowGeometry:
             -self.tilt * (dcos * z_d / math.sin(al) - dsin * x_d),
         )
         disparity = x1 - x2 if second else x2 - x1
-        return _refine_2d(src_x, disparity, coef, c, base_valid, own)
+        return _refine_2d(src_x, disparity, coef, c, valid, own)
+
+    def _segment_inverse(
+        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, fallback: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """The inverse map of :meth:`source_maps` from the forward map at the valid pixel
+        pairs alone (:func:`invert_row_segments`), or None where at least half the pairs
+        are valid (a textured view: the whole-grid map costs less than the gathers). An
+        object on a background has most pixels invalid, and Eq. 2 is then evaluated on its
+        segments only, with the same expressions, so the result equals the whole-grid one."""
+        b, h, w = x1.shape
+        t = self.theta.shape[1]
+        pairs = valid[..., :-1] & valid[..., 1:]
+        if w < 2 or 2 * int(pairs.count_nonzero()) >= pairs.numel():
+            return None
+        bi, hi, ki = pairs.nonzero().unbind(1)
+        # Each valid pair once per angle: (T, P), the angle's coefficients per object.
+        bt = (bi * t + torch.arange(t, device=bi.device)[:, None]).reshape(-1)
+        a, b_, cos_th, sin_th = (
+            v.expand(b, t, 1, 1).reshape(-1).index_select(0, bt).view(t, -1)
+            for v in (self.a, self.b, torch.cos(self.theta), torch.sin(self.theta))
+        )
+        sign = self.sign.reshape(-1).index_select(0, bi)
+        c, al = self.c, self.alpha
+        left = (bi * h + hi) * w + ki
+        flat1, flat2 = x1.reshape(-1), x2.reshape(-1)  # a copy only where x is an expanded grid
+
+        def ends(at: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            big_x, x2c = flat1.index_select(0, at) - c, flat2.index_select(0, at) - c
+            big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
+            dst = c + a * big_x + b_ * x2c
+            return dst.reshape(-1), (sign * (big_z * cos_th - big_x * sin_th)).reshape(-1)
+
+        (f0, d0), (f1, d1) = ends(left), ends(left + 1)
+        row = (bt.view(t, -1) * h + hi).reshape(-1)
+        k = ki.expand(t, -1).reshape(-1)
+        return invert_row_segments(
+            row, k, (f0, f1), (d0, d1), (b, t, h, w), self.max_stretch, fallback=fallback
+        )
 
     def maps(
         self,
