@@ -106,10 +106,10 @@ def invert_row_segments(
         raise ValueError(f"row, k and the ends must all have one shape (P,), got shapes {sorted(sizes)}")
     if len(shape) != 4:
         raise ValueError(f"shape must be (B, T, H, W), got {tuple(shape)}")
-    length = f1 - f0
-    keep = (length > 0) & (length <= max_stretch)
     ends = [dst_ends] if depth_ends is None else [dst_ends, depth_ends]
+    keep = ((f1 - f0) > 0) & ((f1 - f0) <= max_stretch)
     parts = _sparse_columns(row, k, ends, keep, shape[-1], math.prod(shape))
+    del keep
     return _z_buffer(parts, tuple(shape), f0.dtype, f0.device, fallback)
 
 
@@ -124,9 +124,23 @@ def _z_buffer(
     fallback: torch.Tensor | None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The winner of each target pixel among the ``parts`` of :func:`_columns`: its source
-    column (NaN, or ``fallback`` filled, where none covers it) and the hit mask, ``shape`` each."""
+    column (NaN, or ``fallback`` filled, where none covers it) and the hit mask, ``shape``
+    each. Empties ``parts``: their tensors are freed before the fill (a lower peak)."""
     n = math.prod(shape)
-    # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
+    out, hit = _winners(parts, n, dtype, device)
+    parts.clear()
+    hit = hit.view(shape)
+    if fallback is not None:  # the fill reads the hits' columns only, never the holes' -inf
+        return fill_row_holes(out[:n].view(shape), hit, fallback), hit
+    return torch.where(hit, out[:n].view(shape), math.nan), hit
+
+
+def _winners(
+    parts: Parts, n: int, dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """z-buffer: the largest key wins each of the ``n`` target pixels; among equal keys the
+    largest source x. Returns the (n + 1,) winning source columns (-inf where none; the
+    last is the spare pixel) and the (n,) hit mask."""
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
     # other, never concatenated.
     best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
@@ -136,10 +150,7 @@ def _z_buffer(
     for idx, key, src in parts:
         win = key >= best.index_select(0, idx)
         out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax")
-    hit = (best[:n] != -math.inf).view(shape)
-    if fallback is not None:  # the fill reads the hits' columns only, never the holes' -inf
-        return fill_row_holes(out[:n].view(shape), hit, fallback), hit
-    return torch.where(hit, out[:n].view(shape), math.nan), hit
+    return out, best[:n] != -math.inf
 
 
 def _dense_columns(fields: list[torch.Tensor], seg_ok: torch.Tensor) -> Parts:
@@ -314,17 +325,24 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     fb_ends = fallback.expand(shape).gather(-1, ends.view(*shape[:-1], 2)).view(-1, 2)
     shift = torch.where(last >= 0, src_rows.gather(1, ends) - fb_ends, 0.0)
     # The shift of every pixel (s0 before the first hit, 0 inside, s1 after the last) as a
-    # running sum of its steps: s0 at column 0, -s0 at the first hit, s1 after the last.
+    # running sum of its steps: s0 at column 0, -s0 at the first hit, s1 after the last
+    # (on the last hit itself where that is the last column: a hit keeps its own value).
     # Each partial sum is s0, 0 or s1 exactly, and a scan costs less than per-pixel masks.
-    steps = src.new_zeros(src_rows.shape[0], w + 1)
+    steps = src.new_zeros(src_rows.shape[0], w, dtype=torch.promote_types(src.dtype, fallback.dtype))
     steps[:, 0] = shift[:, 0]
     steps.scatter_add_(1, ends[:, :1], -shift[:, :1])
-    steps.scatter_add_(1, ends[:, 1:] + 1, shift[:, 1:])
-    exterior = steps.cumsum(dim=1)[:, :w].view(shape)
-    out = torch.where(hit, src, fallback + exterior).view(-1, w)
+    steps.scatter_add_(1, (ends[:, 1:] + 1).clamp_(max=w - 1), shift[:, 1:])
+    out = steps.cumsum_(dim=1).view(shape).add_(fallback)
+    del steps
+    torch.where(hit, src, out, out=out)
+    out = out.view(-1, w)
     # Holes between two hits interpolate: only the rows that have one (fewer hits than
-    # columns from the first hit to the last) are scanned.
-    rows = (last - first + 1 > as_int.sum(dim=1, keepdim=True)).nonzero()[:, 0]
+    # columns from the first hit to the last) are scanned, and none where the hits fill
+    # every row's extent.
+    extent = (last - first + 1).clamp_(min=0)
+    if int(extent.sum()) == hit.numel() - n_holes:
+        return out.view(shape)
+    rows = (extent > as_int.sum(dim=1, keepdim=True)).nonzero()[:, 0]
     if rows.numel():
         part = out.index_select(0, rows)
         firstf, lastf = (v.index_select(0, rows).to(src.dtype) for v in (first, last))

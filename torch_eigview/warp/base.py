@@ -122,7 +122,7 @@ class ViewWarp(torch.nn.Module):
         Returns:
             (B, T, C, H, W) synthesized views.
         """
-        s, b, t, h, w = maps.src_x.shape
+        s, b, _, h, w = maps.src_x.shape
         c = views.shape[2]
         if masks is not None:
             if masks.shape != (s, b, h, w):
@@ -132,8 +132,8 @@ class ViewWarp(torch.nn.Module):
             m = (masks.to(views.device) != 0).to(views.dtype)[:, :, None]
             views = torch.cat([views * m, m], dim=2)  # the mask rides along: one warp for both
         warped = _sample_views(views, maps.src_x, maps.src_y)  # (S, B, T, C', H, W)
-        out = views.new_zeros(b, t, views.shape[2], h, w)
-        for i in range(s):
+        out = maps.weight[0].to(views.dtype)[:, :, None] * warped[0]
+        for i in range(1, s):
             out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped[i]
         if masks is None:
             return out
@@ -227,10 +227,9 @@ def _sample_views(views: torch.Tensor, src_x: torch.Tensor, src_y: torch.Tensor 
     if dtype in (torch.float32, torch.float64) and not (
         torch.is_grad_enabled() and (xs.requires_grad or gy.requires_grad)
     ):
-        gx = torch.mul(xs, fx).sub_(ox)
         # (x, y) pairs interleaved by a complex tensor: one contiguous pass, where writing
         # each half of the grid in place is a strided pass each and several times slower.
-        grid = torch.view_as_real(torch.complex(gx, gy.expand_as(gx)))
+        grid = torch.view_as_real(torch.complex(torch.mul(xs, fx).sub_(ox), gy.expand_as(xs)))
     else:
         grid = torch.stack([xs * fx - ox, gy.expand_as(xs)], dim=-1)
     out = F.grid_sample(

@@ -233,11 +233,25 @@ class RowGeometry:
         are valid (a textured view: the whole-grid map costs less than the gathers). An
         object on a background has most pixels invalid, and Eq. 2 is then evaluated on its
         segments only, with the same expressions, so the result equals the whole-grid one."""
+        pairs = valid[..., :-1] & valid[..., 1:]
+        if x1.shape[-1] < 2 or 2 * int(pairs.count_nonzero()) >= pairs.numel():
+            return None
+        b, h, w = x1.shape
+        shape = (b, self.theta.shape[1], h, w)
+        return invert_row_segments(
+            *self._segment_ends(x1, x2, pairs), shape, self.max_stretch, fallback=fallback
+        )
+
+    def _segment_ends(
+        self, x1: torch.Tensor, x2: torch.Tensor, pairs: torch.Tensor
+    ) -> tuple[
+        torch.Tensor, torch.Tensor, tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]
+    ]:
+        """Rows, left columns, forward map and depth at both ends of every valid pixel pair
+        (``pairs``, (B, H, W - 1)) for every angle: the arguments of :func:`invert_row_segments`.
+        A function of its own so that its index and coefficient arrays are freed on return."""
         b, h, w = x1.shape
         t = self.theta.shape[1]
-        pairs = valid[..., :-1] & valid[..., 1:]
-        if w < 2 or 2 * int(pairs.count_nonzero()) >= pairs.numel():
-            return None
         bi, hi, ki = pairs.nonzero().unbind(1)
         # Each valid pair once per angle: (T, P), the angle's coefficients per object.
         bt = (bi * t + torch.arange(t, device=bi.device)[:, None]).reshape(-1)
@@ -258,10 +272,7 @@ class RowGeometry:
 
         (f0, d0), (f1, d1) = ends(left), ends(left + 1)
         row = (bt.view(t, -1) * h + hi).reshape(-1)
-        k = ki.expand(t, -1).reshape(-1)
-        return invert_row_segments(
-            row, k, (f0, f1), (d0, d1), (b, t, h, w), self.max_stretch, fallback=fallback
-        )
+        return row, ki.repeat(t), (f0, f1), (d0, d1)
 
     def maps(
         self,
@@ -294,10 +305,10 @@ class RowGeometry:
         )
         # Where both views see a pixel the nearer one in angle weighs more; where one is
         # occluded the other is used alone; where neither sees it, the angular weights.
-        both, neither = hit1 & hit2, ~hit1 & ~hit2
-        # Written in place: the stacked weights need no copies of the two halves.
+        # Written in place: the stacked weights need no copies of the two halves. Both or
+        # neither seeing a pixel is hit1 == hit2.
         weight = src1.new_empty((2, *src1.shape))
-        torch.where(both | neither, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype), out=weight[0])
+        torch.where(hit1 == hit2, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype), out=weight[0])
         torch.sub(1, weight[0], out=weight[1])
         src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
         return WarpMaps(torch.stack([src1, src2]), weight, torch.stack([hit1, hit2]), thetas, src_y)
