@@ -2,8 +2,10 @@
 
 The orthographic camera rotating about the vertical axis moves pixels along their rows
 (Eq. 2), so a seed view's forward map ``x3(x1)`` is inverted row by row:
-:func:`invert_row_map` scans the map's segments (z-buffered where the surface folds) and
-:func:`fill_row_holes` continues the inverse over target pixels no segment covers.
+:func:`invert_row_map` scans the map's segments (z-buffered where the surface folds),
+:func:`invert_row_segments` does the same from the ends of the candidate segments alone
+(a map that is mostly background), and :func:`fill_row_holes` continues the inverse over
+target pixels no segment covers.
 :class:`~torch_eigview.warp.novel_view.NovelViewWarp` builds its maps with both.
 """
 
@@ -187,8 +189,8 @@ def _sparse_columns(
     k = k_int.to(f0.dtype)
     gathered = [v for pair in ends for v in pair]
     # A finite sum of the ends proves every end finite (a NaN or an infinity would carry
-    # into it), which spares the elementwise test in the common case.
-    ok = None if _sum_is_finite(gathered) else _all_finite(gathered)
+    # into it; an overflow only costs the elementwise test), the common case's shortcut.
+    ok = None if math.isfinite(float(sum(v.sum() for v in gathered))) else _all_finite(gathered)
     if keep is not None:
         ok = keep if ok is None else ok & keep
 
@@ -246,25 +248,12 @@ def _columns(
         c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
         col = c0 + m
         lo, start = locate(cand)
-        sel = (
-            None
-            if flat_depth is None
-            else (flat_depth[0].index_select(0, cand), flat_depth[1].index_select(0, cand))
-        )
+        sel = None if flat_depth is None else (flat_depth[0][cand], flat_depth[1][cand])
         src_m, key_m = _interpolate((col - s0) / ln, lo, sel)
         parts.append((start + col.long(), key_m, src_m))
         m += 1
         cand = cand[flat[3].index_select(0, cand) >= m]
     return parts
-
-
-def _sum_is_finite(values: list[torch.Tensor]) -> bool:
-    """Whether the sum of all elements of ``values`` is finite (then each of them is; an
-    overflow of the sum only sends the caller to the elementwise test)."""
-    total = values[0].sum()
-    for v in values[1:]:
-        total += v.sum()
-    return math.isfinite(float(total))
 
 
 def _all_finite(values: list[torch.Tensor]) -> torch.Tensor:
@@ -293,10 +282,10 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
 
     A row splits into its exterior, before its first hit and after its last, where the
     map is the fallback plus one shift per side, and its interior, from the first hit to
-    the last, where holes interpolate between their neighbouring hits. The exterior is a
-    few whole-grid float passes; only the interior (the object's extent) is gathered,
-    scanned and written back, so a view that is mostly background costs little more
-    than the fallback itself.
+    the last, where holes interpolate between their neighbouring hits. Where most pixels
+    are holes the exterior is a few whole-grid passes (a running sum of the shifts), and
+    only the rows with a hole inside are gathered and scanned; where most are hits the
+    holes alone are.
 
     Args:
         src: (..., W) map, trusted where ``hit`` (any value elsewhere, NaN included).
