@@ -231,14 +231,15 @@ def _columns(
         spare pixel), the z-buffer key and the source column.
     """
     (f0, f1), dd = ends[0], (ends[1] if len(ends) > 1 else None)
+    # In place where it can: fewer large temporaries per call, the same values.
     length = f1 - f0
-    col0 = torch.ceil(f0).clamp(min=0)
-    room = torch.floor(f1).clamp(max=w - 1) - col0
+    col0 = torch.ceil(f0).clamp_(min=0)
+    room = torch.floor(f1).clamp_(max=w - 1).sub_(col0)
     if ok is not None:
-        room = torch.where(ok, room, -1.0)
+        room.masked_fill_(~ok, -1.0)
     ok0 = room >= 0
-    src0, key0 = _interpolate((col0 - f0) / length, k, dd)
-    idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
+    src0, key0 = _interpolate((col0 - f0).div_(length), k, dd)
+    idx0 = col0.clamp(max=w - 1).long().add_(row_start).masked_fill_(~ok0, n).reshape(-1)
     parts = [(idx0, torch.where(ok0, key0, -math.inf).reshape(-1), src0.reshape(-1))]
     flat = [v.reshape(-1) for v in (col0, f0, length, room)]
     flat_depth = None if dd is None else (dd[0].reshape(-1), dd[1].reshape(-1))
@@ -269,9 +270,9 @@ def _interpolate(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Source column ``lo + frac`` inside a segment and its z-buffer key (the depth of its
     ends ``depth`` interpolated, or the source column itself without depth)."""
-    src = lo + frac
-    key = src if depth is None else depth[0] + (depth[1] - depth[0]) * frac
-    return src, key
+    key = None if depth is None else (depth[1] - depth[0]).mul_(frac).add_(depth[0])
+    src = frac.add_(lo)  # frac is the caller's temporary
+    return src, src if key is None else key
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
@@ -331,7 +332,7 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     extent = (last - first + 1).clamp_(min=0)
     if int(extent.sum()) == hit.numel() - n_holes:
         return out.view(shape)
-    rows = (extent > as_int.sum(dim=1, keepdim=True)).nonzero()[:, 0]
+    rows = (extent > as_int.sum(dim=1, keepdim=True, dtype=small)).nonzero()[:, 0]
     if rows.numel():
         part = out.index_select(0, rows)
         firstf, lastf = (v.index_select(0, rows).to(src.dtype) for v in (first, last))

@@ -253,25 +253,29 @@ class RowGeometry:
         b, h, w = x1.shape
         t = self.theta.shape[1]
         bi, hi, ki = pairs.nonzero().unbind(1)
-        # Each valid pair once per angle: (T, P), the angle's coefficients per object.
-        bt = (bi * t + torch.arange(t, device=bi.device)[:, None]).reshape(-1)
+        # Each valid pair once per angle: (T, P), the angle's coefficients per object. The
+        # arithmetic runs in place where it can: fewer large temporaries per call.
+        bt = bi if t == 1 else (bi * t + torch.arange(t, device=bi.device)[:, None]).reshape(-1)
         a, b_, cos_th, sin_th = (
             v.expand(b, t, 1, 1).reshape(-1).index_select(0, bt).view(t, -1)
             for v in (self.a, self.b, torch.cos(self.theta), torch.sin(self.theta))
         )
         sign = self.sign.reshape(-1).index_select(0, bi)
         c, al = self.c, self.alpha
-        left = (bi * h + hi) * w + ki
+        left = (bi * h).add_(hi).mul_(w).add_(ki)
         flat1, flat2 = x1.reshape(-1), x2.reshape(-1)  # a copy only where x is an expanded grid
 
         def ends(at: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            big_x, x2c = flat1.index_select(0, at) - c, flat2.index_select(0, at) - c
-            big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
-            dst = c + a * big_x + b_ * x2c
-            return dst.reshape(-1), (sign * (big_z * cos_th - big_x * sin_th)).reshape(-1)
+            # Eq. 2's expressions of source_maps, operation for operation.
+            big_x, x2c = flat1.index_select(0, at).sub_(c), flat2.index_select(0, at).sub_(c)
+            big_z = big_x * math.cos(al)
+            torch.sub(x2c, big_z, out=big_z).div_(math.sin(al))
+            dst = (a * big_x).add_(c).add_(b_ * x2c)
+            depth = (big_z * cos_th).sub_(big_x * sin_th).mul_(sign)
+            return dst.reshape(-1), depth.reshape(-1)
 
         (f0, d0), (f1, d1) = ends(left), ends(left + 1)
-        row = (bt.view(t, -1) * h + hi).reshape(-1)
+        row = (bt.view(t, -1) * h).add_(hi).reshape(-1)
         return row, ki.repeat(t), (f0, f1), (d0, d1)
 
     def maps(
