@@ -227,9 +227,12 @@ def _sample_views(views: torch.Tensor, src_x: torch.Tensor, src_y: torch.Tensor 
     if dtype in (torch.float32, torch.float64) and not (
         torch.is_grad_enabled() and (xs.requires_grad or gy.requires_grad)
     ):
-        # (x, y) pairs interleaved by a complex tensor: one contiguous pass, where writing
-        # each half of the grid in place is a strided pass each and several times slower.
-        grid = torch.view_as_real(torch.complex(torch.mul(xs, fx).sub_(ox), gy.expand_as(xs)))
+        # The (x, y) pairs interleaved by a complex tensor in one pass (writing each half
+        # of an empty grid is a slower strided pass each), then x normalized in place: the
+        # grid is the only full-size buffer, which keeps a call's peak of memory low.
+        grid = torch.view_as_real(torch.complex(xs, gy.expand_as(xs)))
+        gx = grid[..., 0]
+        torch.mul(gx, fx, out=gx).sub_(ox)
     else:
         grid = torch.stack([xs * fx - ox, gy.expand_as(xs)], dim=-1)
     out = F.grid_sample(
