@@ -263,18 +263,23 @@ class RowGeometry:
         sign = self.sign.reshape(-1).index_select(0, bi)
         c, al = self.c, self.alpha
         left = (bi * h).add_(hi).mul_(w).add_(ki)
-        flat1, flat2 = x1.reshape(-1), x2.reshape(-1)  # a copy only where x is an expanded grid
 
-        def ends(at: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        def take(x: torch.Tensor, at: torch.Tensor, col: torch.Tensor) -> torch.Tensor:
+            # The pixel grid of the source view is one row expanded: read from the row.
+            if x.stride(0) == 0 and x.stride(1) == 0:
+                return x[0, 0].index_select(0, col)
+            return x.reshape(-1).index_select(0, at)
+
+        def ends(at: torch.Tensor, col: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
             # Eq. 2's expressions of source_maps, operation for operation.
-            big_x, x2c = flat1.index_select(0, at).sub_(c), flat2.index_select(0, at).sub_(c)
+            big_x, x2c = take(x1, at, col).sub_(c), take(x2, at, col).sub_(c)
             big_z = big_x * math.cos(al)
             torch.sub(x2c, big_z, out=big_z).div_(math.sin(al))
             dst = (a * big_x).add_(c).add_(b_ * x2c)
             depth = (big_z * cos_th).sub_(big_x * sin_th).mul_(sign)
             return dst.reshape(-1), depth.reshape(-1)
 
-        (f0, d0), (f1, d1) = ends(left), ends(left + 1)
+        (f0, d0), (f1, d1) = ends(left, ki), ends(left + 1, ki + 1)
         row = (bt.view(t, -1) * h).add_(hi).reshape(-1)
         return row, ki.repeat(t), (f0, f1), (d0, d1)
 
