@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map, invert_row_segments
 
 from tests.helpers import rand
 
@@ -163,6 +163,64 @@ def test_invert_row_map_no_segment() -> None:
     assert not bool(hit.any()) and bool(torch.isnan(src).all())
     src, hit = invert_row_map(torch.zeros(1, 1, 2, 1), torch.ones(1, 2, 1, dtype=torch.bool), None)
     assert src.shape == (1, 1, 2, 1) and not bool(hit.any())
+
+
+def _segments_of(
+    dst: torch.Tensor, valid: torch.Tensor, depth: torch.Tensor | None
+) -> tuple[
+    torch.Tensor, torch.Tensor, tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor] | None
+]:
+    """The arguments of invert_row_segments: every pair of valid neighbours (the order,
+    length and finiteness tests left to it), (row, k) in the B·T·H rows, the ends gathered."""
+    b, t, h, w = dst.shape
+    pairs = valid[..., :-1] & valid[..., 1:]
+    row, k = pairs.expand(b, t, h, w - 1).reshape(-1, w - 1).nonzero().unbind(1)
+
+    def at(v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        rows = v.reshape(-1, w)
+        return rows[row, k], rows[row, k + 1]
+
+    return row, k, at(dst), None if depth is None else at(depth)
+
+
+@pytest.mark.parametrize("use_depth", [True, False])
+@pytest.mark.parametrize("stretch", [math.inf, 2.5])
+@pytest.mark.parametrize("valid_rate", [0.25, 0.9])
+def test_invert_row_segments_equals_invert_row_map_bit_for_bit(
+    use_depth: bool, stretch: float, valid_rate: float
+) -> None:
+    """Given the valid pairs alone (their order, length and finiteness tested inside), the
+    same inverse as from the whole maps: folds, long segments, non-finite ends, T angles,
+    and with a fallback the same filled map."""
+    b, t, h, w = 3, 2, 4, 13
+    x = torch.arange(w, dtype=torch.float64)
+    dst = x + 2.4 * torch.sin(0.9 * x + rand(b, t, h, 1, seed=51) * 6)
+    depth = rand(b, t, h, w, seed=52) if use_depth else None
+    valid = rand(b, 1, h, w, seed=53) < valid_rate
+    dst[0, 1, 2, 4], dst[2, 0, 1, 7] = math.inf, math.nan
+    if depth is not None:
+        depth[1, 1, 3, 5] = -math.inf
+    src, hit = invert_row_map(dst, valid[:, 0], depth, stretch)
+    seg_src, seg_hit = invert_row_segments(*_segments_of(dst, valid, depth), (b, t, h, w), stretch)
+    assert torch.equal(seg_hit, hit) and bool(hit.any())
+    assert torch.equal(seg_src[hit], src[hit]) and bool(torch.isnan(seg_src[~hit]).all())
+    fallback = (0.9 * x + 0.4).expand(b, t, h, w)
+    filled, _ = invert_row_segments(
+        *_segments_of(dst, valid, depth), (b, t, h, w), stretch, fallback=fallback
+    )
+    assert torch.equal(filled, fill_row_holes(src, hit, fallback))
+    assert torch.equal(invert_row_map(dst, valid[:, 0], depth, stretch, fallback=fallback)[0], filled)
+
+
+def test_invert_row_segments_none_and_errors() -> None:
+    empty = torch.zeros(0, dtype=torch.int64)
+    ends = (torch.zeros(0), torch.zeros(0))
+    src, hit = invert_row_segments(empty, empty, ends, None, (1, 1, 2, 5))
+    assert src.shape == (1, 1, 2, 5) and not bool(hit.any()) and bool(torch.isnan(src).all())
+    with pytest.raises(ValueError, match=r"one shape \(P,\)"):
+        invert_row_segments(empty, torch.zeros(2, dtype=torch.int64), ends, None, (1, 1, 2, 5))
+    with pytest.raises(ValueError, match=r"shape must be \(B, T, H, W\)"):
+        invert_row_segments(empty, empty, ends, None, (2, 5))  # type: ignore[arg-type]
 
 
 def _fill_row_holes_loop(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:

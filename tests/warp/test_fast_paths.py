@@ -249,6 +249,58 @@ def test_refine_2d_stops_at_a_fixed_point_with_the_same_result() -> None:
     assert bool(once[2][..., 1:-1, 1:-1].all())
 
 
+@pytest.mark.parametrize("second", [False, True])
+@pytest.mark.parametrize("angles", ["shared", "per_object", "own"])
+def test_source_maps_on_a_background_equal_the_whole_grid_maps_bit_for_bit(
+    second: bool, angles: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Objects on a background (most pixels invalid): Eq. 2 at the valid pixel pairs alone
+    (invert_row_segments) gives the whole-grid maps bit for bit, for T shared angles and
+    for each object's own; the seed's own angle (every pixel trusted) takes the whole grid."""
+    b, h, w = 3, 10, 24
+    corr = _corr(b, h, w, 7, torch.float32)
+    band = torch.zeros(b, h, w, dtype=torch.bool)
+    band[:, :, 6:15] = True  # an object's extent; outside, no correspondence
+    corr.valid_12.logical_and_(band)
+    corr.valid_21.logical_and_(band)
+    thetas = {
+        "shared": [-12.0, 6.0, 14.0],
+        "per_object": torch.tensor([[-12.0, 4.0], [7.0, 15.0], [-3.0, 9.5]]),
+        "own": [-12.0, 0.0, 6.0, 10.0],
+    }[angles]
+    warp = NovelViewWarp(10.0)
+    captured: dict[str, RowGeometry] = {}
+    original = RowGeometry.maps
+
+    def spy(self: RowGeometry, *args: object, **kwargs: object) -> WarpMaps:
+        captured["geo"] = self
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(RowGeometry, "maps", spy)
+    warp.maps(corr, thetas)
+    geo = captured["geo"]
+    calls: list[int] = []
+    import torch_eigview.warp.maps as maps_module
+
+    segments = maps_module.invert_row_segments
+
+    def counted(*args: object, **kwargs: object) -> tuple[torch.Tensor, torch.Tensor]:
+        calls.append(1)
+        return segments(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(maps_module, "invert_row_segments", counted)
+    cols = torch.arange(w, dtype=torch.float32).expand(b, h, w)
+    if second:
+        args = (cols + corr.disparity_21, cols, corr.valid_21)
+    else:
+        args = (cols, cols + corr.disparity_12, corr.valid_12)
+    src, _, hit = geo.source_maps(*args, second=second)
+    ref_src, _, ref_hit = _old_source_maps(geo, *args, second=second)
+    assert calls == ([] if angles == "own" else [1])  # a seed's own angle: the whole grid
+    assert torch.equal(hit, ref_hit) and bool(hit.any()) and bool((~hit).any())
+    assert torch.equal(src, ref_src)
+
+
 def test_invert_row_map_long_segments_keep_their_z_order() -> None:
     """Slots m >= 1 are scattered after slot 0 (no concatenation): a long near segment
     still wins over a short far one that covers the same column in slot 0."""

@@ -2,18 +2,21 @@
 
 The orthographic camera rotating about the vertical axis moves pixels along their rows
 (Eq. 2), so a seed view's forward map ``x3(x1)`` is inverted row by row:
-:func:`invert_row_map` scans the map's segments (z-buffered where the surface folds) and
-:func:`fill_row_holes` continues the inverse over target pixels no segment covers.
+:func:`invert_row_map` scans the map's segments (z-buffered where the surface folds),
+:func:`invert_row_segments` does the same from the ends of the candidate segments alone
+(a map that is mostly background), and :func:`fill_row_holes` continues the inverse over
+target pixels no segment covers.
 :class:`~torch_eigview.warp.novel_view.NovelViewWarp` builds its maps with both.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 
-__all__ = ["fill_row_holes", "invert_row_map"]
+__all__ = ["fill_row_holes", "invert_row_map", "invert_row_segments"]
 
 
 def invert_row_map(
@@ -21,6 +24,8 @@ def invert_row_map(
     valid: torch.Tensor,
     depth: torch.Tensor | None,
     max_stretch: float = math.inf,
+    *,
+    fallback: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Inverts a forward map along rows: the source column sampled by each target pixel.
 
@@ -39,22 +44,105 @@ def invert_row_map(
         valid: (B, H, W) or (B, T, H, W) bool, source pixels with a trusted correspondence.
         depth: (B, T, H, W) depth towards the novel camera, or None (ties: largest source x).
         max_stretch: longest segment (target pixels) still taken as one surface.
+        fallback: map broadcastable to (B, T, H, W), or None. Given, the holes are filled
+            at once (:func:`fill_row_holes` with it), which spares a pass writing NaN.
 
     Returns:
         ``(src_x_for_dst, hit)``, (B, T, H, W) each; ``src_x_for_dst`` is NaN where
-        ``hit`` is False.
+        ``hit`` is False, or, with ``fallback``, filled there.
     """
     b, t, h, w = dst_x_for_src.shape
     dtype, device = dst_x_for_src.dtype, dst_x_for_src.device
-    n = b * t * h * w
     f0, f1 = dst_x_for_src[..., :-1], dst_x_for_src[..., 1:]
     length = f1 - f0
     valid = valid[:, None] if valid.ndim == 3 else valid
     seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
-    if w < 2 or not bool(seg_ok.any()):
-        return torch.full((b, t, h, w), math.nan, dtype=dtype, device=device), seg_ok.new_zeros(b, t, h, w)
-    parts = _segment_columns(dst_x_for_src, depth, seg_ok)
-    # z-buffer: the largest key wins each target pixel; among equal keys the largest source x.
+    n_seg = int(seg_ok.count_nonzero())
+    fields = [dst_x_for_src] if depth is None else [dst_x_for_src, depth]
+    parts: Parts = []
+    if n_seg and 2 * n_seg >= seg_ok.numel():
+        parts = _dense_columns(fields, seg_ok)
+    elif n_seg:
+        # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
+        row, k = seg_ok.reshape(-1, w - 1).nonzero().unbind(1)
+        left = row * w + k  # source pixel k of the segment, flat in (B, T, H, W)
+        ends = [
+            (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
+        ]
+        parts = _sparse_columns(row, k, ends, None, w, b * t * h * w)
+    return _z_buffer(parts, (b, t, h, w), dtype, device, fallback)
+
+
+def invert_row_segments(
+    row: torch.Tensor,
+    k: torch.Tensor,
+    dst_ends: tuple[torch.Tensor, torch.Tensor],
+    depth_ends: tuple[torch.Tensor, torch.Tensor] | None,
+    shape: tuple[int, int, int, int],
+    max_stretch: float = math.inf,
+    *,
+    fallback: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`invert_row_map` given its candidate segments alone, for a map that is mostly
+    background: the caller evaluates the forward map at the ends of the segments whose two
+    source pixels are valid, never on the whole grid.
+
+    The same segments pass (order kept, at most ``max_stretch`` long, finite ends), and
+    the result equals :func:`invert_row_map`'s on the full maps bit for bit.
+
+    Args:
+        row: (P,) int64 row of each segment in the B·T·H rows of ``shape``.
+        k: (P,) int64 its left source column (the right one is k + 1).
+        dst_ends: ``(f0, f1)``, each (P,), the forward map at columns k and k + 1.
+        depth_ends: ``(d0, d1)``, each (P,), the depth there, or None.
+        shape: ``(B, T, H, W)`` of the maps.
+        max_stretch: longest segment (target pixels) still taken as one surface.
+        fallback: as :func:`invert_row_map`'s.
+
+    Returns:
+        ``(src_x_for_dst, hit)``, (B, T, H, W) each, as :func:`invert_row_map` returns them.
+    """
+    f0, f1 = dst_ends
+    sizes = {tuple(v.shape) for v in (row, k, f0, f1, *(depth_ends or ()))}
+    if len(sizes) != 1 or len(next(iter(sizes))) != 1:
+        raise ValueError(f"row, k and the ends must all have one shape (P,), got shapes {sorted(sizes)}")
+    if len(shape) != 4:
+        raise ValueError(f"shape must be (B, T, H, W), got {tuple(shape)}")
+    ends = [dst_ends] if depth_ends is None else [dst_ends, depth_ends]
+    keep = ((f1 - f0) > 0) & ((f1 - f0) <= max_stretch)
+    parts = _sparse_columns(row, k, ends, keep, shape[-1], math.prod(shape))
+    del keep
+    return _z_buffer(parts, tuple(shape), f0.dtype, f0.device, fallback)
+
+
+Parts = list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]
+
+
+def _z_buffer(
+    parts: Parts,
+    shape: tuple[int, ...],
+    dtype: torch.dtype,
+    device: torch.device,
+    fallback: torch.Tensor | None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The winner of each target pixel among the ``parts`` of :func:`_columns`: its source
+    column (NaN, or ``fallback`` filled, where none covers it) and the hit mask, ``shape``
+    each. Empties ``parts``: their tensors are freed before the fill (a lower peak)."""
+    n = math.prod(shape)
+    out, hit = _winners(parts, n, dtype, device)
+    parts.clear()
+    hit = hit.view(shape)
+    if fallback is not None:  # the fill reads the hits' columns only, never the holes' -inf
+        return fill_row_holes(out[:n].view(shape), hit, fallback), hit
+    return torch.where(hit, out[:n].view(shape), math.nan), hit
+
+
+def _winners(
+    parts: Parts, n: int, dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """z-buffer: the largest key wins each of the ``n`` target pixels; among equal keys the
+    largest source x. Returns the (n + 1,) winning source columns (-inf where none; the
+    last is the spare pixel) and the (n,) hit mask."""
     # Both reductions are maxima, so the parts (one per slot) are scattered one after the
     # other, never concatenated.
     best = torch.full((n + 1,), -math.inf, dtype=dtype, device=device)
@@ -64,63 +152,94 @@ def invert_row_map(
     for idx, key, src in parts:
         win = key >= best.index_select(0, idx)
         out.scatter_reduce_(0, idx, torch.where(win, src, -math.inf), reduce="amax")
-    hit = best[:n] != -math.inf
-    return torch.where(hit, out[:n], math.nan).view(b, t, h, w), hit.view(b, t, h, w)
+    return out, best[:n] != -math.inf
 
 
-def _segment_columns(
-    dst: torch.Tensor, depth: torch.Tensor | None, seg_ok: torch.Tensor
-) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+def _dense_columns(fields: list[torch.Tensor], seg_ok: torch.Tensor) -> Parts:
+    """:func:`_columns` when most segments pass (a view's object fills it): slot 0 on views
+    of the whole map, a refused segment sending key -inf to a spare pixel."""
+    b, t, h, w = fields[0].shape
+    dtype, device, w1 = fields[0].dtype, fields[0].device, w - 1
+    ends = [(v[..., :-1], v[..., 1:]) for v in fields]
+    k = torch.arange(w1, dtype=dtype, device=device)
+    row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
+    # A non-finite end (map or depth) is no surface.
+    finite = _all_finite(fields)
+    ok = seg_ok & finite[..., :-1] & finite[..., 1:]
+
+    def locate(cand: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return (cand % w1).to(dtype), (cand // w1) * w
+
+    return _columns(ends, k, row_start, ok, w, fields[0].numel(), locate)
+
+
+def _sparse_columns(
+    row: torch.Tensor,
+    k_int: torch.Tensor,
+    ends: list[tuple[torch.Tensor, torch.Tensor]],
+    keep: torch.Tensor | None,
+    w: int,
+    n: int,
+) -> Parts:
+    """:func:`_columns` when few segments pass (a background around the object): only the
+    segments in (``row``, ``k_int``), their ``ends`` gathered; ``keep`` the ones that pass
+    the order and length tests (None: all); ``n`` the spare pixel, B·T·H·W."""
+    f0 = ends[0][0]
+    row_start = row * w
+    k = k_int.to(f0.dtype)
+    gathered = [v for pair in ends for v in pair]
+    # A finite sum of the ends proves every end finite (a NaN or an infinity would carry
+    # into it; an overflow only costs the elementwise test), the common case's shortcut.
+    ok = None if math.isfinite(float(sum(v.sum() for v in gathered))) else _all_finite(gathered)
+    if keep is not None:
+        ok = keep if ok is None else ok & keep
+
+    def locate(cand: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return k.index_select(0, cand), row_start.index_select(0, cand)
+
+    return _columns(ends, k, row_start, ok, w, n, locate)
+
+
+def _columns(
+    ends: list[tuple[torch.Tensor, torch.Tensor]],
+    k: torch.Tensor,
+    row_start: torch.Tensor,
+    ok: torch.Tensor | None,
+    w: int,
+    n: int,
+    locate: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+) -> Parts:
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
     Segment k of a row (source pixels k, k + 1) starts at target column ``f0 = dst[k]``
     and ends at ``f1 = dst[k + 1]``; it covers the integer columns ``col0 + m`` inside the
-    image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``. When most segments
-    pass (a view's object fills it) slot 0 is computed for all of them on views of the
-    map, a refused one sending key -inf to a spare pixel; when few do (a background around
-    the object) only those are gathered. Slots m >= 1 gather the few segments that reach
-    them (views foreshorten).
+    image, ``col0 = ceil(f0)`` clamped at 0, for ``0 <= m <= room``. Slot 0 takes every
+    segment (a refused one, ``ok`` False, sends key -inf to the spare pixel ``n``); slots
+    m >= 1 gather the few segments that reach them (views foreshorten).
 
     Args:
-        dst: (B, T, H, W) forward map; ``depth`` the same shape or None.
-        seg_ok: (B, T, H, W - 1) bool, the segments to rasterize.
+        ends: ``(f0, f1)`` of the map and, optionally, ``(d0, d1)`` of the depth, each
+            over the segments (any shape, the shape of ``k`` broadcast with ``row_start``).
+        k: the segments' left source column (float); ``row_start`` their row's first
+            flat pixel in B·T·H·W.
+        ok: bool, the segments that pass, or None (all).
+        w: the row length W; ``n``: the spare pixel, B·T·H·W.
+        locate: flat indices of the segments (``cand``) → their ``(k, row_start)``.
 
     Returns:
-        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel in
-        B·T·H·W (or the spare pixel B·T·H·W), the z-buffer key and the source column.
+        One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel (or the
+        spare pixel), the z-buffer key and the source column.
     """
-    b, t, h, w = dst.shape
-    dtype, device, n, w1 = dst.dtype, dst.device, dst.numel(), w - 1
-    fields = [dst] if depth is None else [dst, depth]
-    dense = 2 * int(seg_ok.sum()) >= seg_ok.numel()
-    if dense:
-        ends = [(v[..., :-1], v[..., 1:]) for v in fields]
-        k: torch.Tensor = torch.arange(w1, dtype=dtype, device=device)
-        row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
-    else:
-        # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
-        row, k_int = seg_ok.reshape(-1, w1).nonzero().unbind(1)
-        row_start = row * w
-        left = row_start + k_int  # source pixel k of the segment, flat in (B, T, H, W)
-        ends = [
-            (v.reshape(-1).index_select(0, left), v.reshape(-1).index_select(0, left + 1)) for v in fields
-        ]
-        k = k_int.to(dtype)
-    # A non-finite end (map or depth) is no surface: checked on the whole map when most
-    # segments pass, on the gathered ends otherwise.
-    if dense:
-        finite = _all_finite(fields)
-        ok = seg_ok & finite[..., :-1] & finite[..., 1:]
-    else:
-        ok = _all_finite([v for pair in ends for v in pair])
-    (f0, f1), dd = ends[0], (ends[1] if depth is not None else None)
+    (f0, f1), dd = ends[0], (ends[1] if len(ends) > 1 else None)
+    # In place where it can: fewer large temporaries per call, the same values.
     length = f1 - f0
-    col0 = torch.ceil(f0).clamp(min=0)
-    room = torch.floor(f1).clamp(max=w - 1) - col0
-    room = torch.where(ok, room, -1.0)
+    col0 = torch.ceil(f0).clamp_(min=0)
+    room = torch.floor(f1).clamp_(max=w - 1).sub_(col0)
+    if ok is not None:
+        room.masked_fill_(~ok, -1.0)
     ok0 = room >= 0
-    src0, key0 = _interpolate((col0 - f0) / length, k, dd)
-    idx0 = torch.where(ok0, row_start + col0.clamp(max=w - 1).long(), n).reshape(-1)
+    src0, key0 = _interpolate((col0 - f0).div_(length), k, dd)
+    idx0 = col0.clamp(max=w - 1).long().add_(row_start).masked_fill_(~ok0, n).reshape(-1)
     parts = [(idx0, torch.where(ok0, key0, -math.inf).reshape(-1), src0.reshape(-1))]
     flat = [v.reshape(-1) for v in (col0, f0, length, room)]
     flat_depth = None if dd is None else (dd[0].reshape(-1), dd[1].reshape(-1))
@@ -129,15 +248,8 @@ def _segment_columns(
     while cand.numel():
         c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
         col = c0 + m
-        if dense:
-            lo, start = (cand % w1).to(dtype), (cand // w1) * w
-        else:
-            lo, start = k.index_select(0, cand), row_start.index_select(0, cand)
-        sel = (
-            None
-            if flat_depth is None
-            else (flat_depth[0].index_select(0, cand), flat_depth[1].index_select(0, cand))
-        )
+        lo, start = locate(cand)
+        sel = None if flat_depth is None else (flat_depth[0][cand], flat_depth[1][cand])
         src_m, key_m = _interpolate((col - s0) / ln, lo, sel)
         parts.append((start + col.long(), key_m, src_m))
         m += 1
@@ -158,9 +270,9 @@ def _interpolate(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Source column ``lo + frac`` inside a segment and its z-buffer key (the depth of its
     ends ``depth`` interpolated, or the source column itself without depth)."""
-    src = lo + frac
-    key = src if depth is None else depth[0] + (depth[1] - depth[0]) * frac
-    return src, key
+    key = None if depth is None else (depth[1] - depth[0]).mul_(frac).add_(depth[0])
+    src = frac.add_(lo)  # frac is the caller's temporary
+    return src, src if key is None else key
 
 
 def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
@@ -171,10 +283,10 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
 
     A row splits into its exterior, before its first hit and after its last, where the
     map is the fallback plus one shift per side, and its interior, from the first hit to
-    the last, where holes interpolate between their neighbouring hits. The exterior is a
-    few whole-grid float passes; only the interior (the object's extent) is gathered,
-    scanned and written back, so a view that is mostly background costs little more
-    than the fallback itself.
+    the last, where holes interpolate between their neighbouring hits. Where most pixels
+    are holes the exterior is a few whole-grid passes (a running sum of the shifts), and
+    only the rows with a hole inside are gathered and scanned; where most are hits the
+    holes alone are.
 
     Args:
         src: (..., W) map, trusted where ``hit`` (any value elsewhere, NaN included).
@@ -185,26 +297,49 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
         (..., W) the map with its holes filled (a new tensor).
     """
     shape, w = src.shape, src.shape[-1]
-    n_holes = int((~hit).sum())
+    n_holes = hit.numel() - int(hit.count_nonzero())
     if n_holes == 0:
         return src.clone()
     if 2 * n_holes < hit.numel():
         return _fill_holes_only(src, hit, fallback)
-    dtype, device = src.dtype, src.device
     src_rows, hit_rows = src.reshape(-1, w), hit.reshape(-1, w)
-    fb = fallback.expand(shape).reshape(-1, w)  # a view where fallback is an expanded row
-    cols = torch.arange(w, dtype=dtype, device=device)
-    # First and last hit of each row as maxima over the row (w and -1 for a row without one).
-    hitf = hit_rows.to(dtype)
-    first = w - (hitf * (w - cols)).amax(dim=-1, keepdim=True)
-    last = (hitf * (cols + 1)).amax(dim=-1, keepdim=True) - 1
-    has_hit = last >= 0
+    # First and last hit of each row as maxima over the row, in a small integer type (W and
+    # -1 on a row without one, whose shifts are 0 and whose pixels are all exterior).
+    small = torch.int16 if w < 2**15 - 1 else torch.int64
+    as_int = hit_rows.to(small)
+    cols = torch.arange(w, dtype=small, device=src.device)
+    first = w - (as_int * (w - cols)).amax(dim=-1, keepdim=True)
+    last = (as_int * (cols + 1)).amax(dim=-1, keepdim=True) - 1
     ends = torch.cat([first, last], dim=1).clamp(0, w - 1).long()
     # The exterior's shift, map minus fallback at the nearest hit; 0 on a row without hits.
-    shift = torch.where(has_hit, src_rows.gather(1, ends) - fb.gather(1, ends), 0.0)
-    out = fb + (first - cols).clamp_(0, 1).mul_(shift[:, :1])
-    out += (cols - last).clamp_(0, 1).mul_(shift[:, 1:])
-    _fill_interior(out.view(-1), src_rows, hit_rows, first, last)
+    fb_ends = fallback.expand(shape).gather(-1, ends.view(*shape[:-1], 2)).view(-1, 2)
+    shift = torch.where(last >= 0, src_rows.gather(1, ends) - fb_ends, 0.0)
+    # The shift of every pixel (s0 before the first hit, 0 inside, s1 after the last) as a
+    # running sum of its steps: s0 at column 0, -s0 at the first hit, s1 after the last
+    # (on the last hit itself where that is the last column: a hit keeps its own value).
+    # Each partial sum is s0, 0 or s1 exactly, and a scan costs less than per-pixel masks.
+    steps = src.new_zeros(src_rows.shape[0], w, dtype=torch.promote_types(src.dtype, fallback.dtype))
+    steps[:, 0] = shift[:, 0]
+    steps.scatter_add_(1, ends[:, :1], -shift[:, :1])
+    steps.scatter_add_(1, (ends[:, 1:] + 1).clamp_(max=w - 1), shift[:, 1:])
+    out = steps.cumsum_(dim=1).view(shape).add_(fallback)
+    del steps
+    torch.where(hit, src, out, out=out)
+    out = out.view(-1, w)
+    # Holes between two hits interpolate: only the rows that have one (fewer hits than
+    # columns from the first hit to the last) are scanned, and none where the hits fill
+    # every row's extent.
+    extent = (last - first + 1).clamp_(min=0)
+    if int(extent.sum()) == hit.numel() - n_holes:
+        return out.view(shape)
+    rows = (extent > as_int.sum(dim=1, keepdim=True, dtype=small)).nonzero()[:, 0]
+    if rows.numel():
+        part = out.index_select(0, rows)
+        firstf, lastf = (v.index_select(0, rows).to(src.dtype) for v in (first, last))
+        _fill_interior(
+            part.view(-1), src_rows.index_select(0, rows), hit_rows.index_select(0, rows), firstf, lastf
+        )
+        out.index_copy_(0, rows, part)
     return out.view(shape)
 
 

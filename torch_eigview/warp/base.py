@@ -12,6 +12,7 @@ Convention:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import torch
 import torch.nn.functional as F
@@ -101,12 +102,15 @@ class ViewWarp(torch.nn.Module):
         return lam2 if self.blend == "linear" else (lam2 > 0.5).to(lam2.dtype)
 
     @staticmethod
-    def apply_maps(maps: WarpMaps, views: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
+    def apply_maps(
+        maps: WarpMaps, views: torch.Tensor | Sequence[torch.Tensor], masks: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Samples and blends the seed views with precomputed maps.
 
         Args:
             maps: :class:`~torch_eigview.warp.maps.WarpMaps` with S sources for B objects and T angles.
-            views: (S, B, C, H, W) seed images.
+            views: (S, B, C, H, W) seed images, or a sequence of the S (B, C, H, W) ones
+                (not stacked: one copy of the seeds fewer).
             masks: optional (S, B, H, W) foreground masks of the seed views (non-zero is
                 foreground, any dtype):
                 *silhouette-aware* sampling. Each target pixel's bilinear taps, over both
@@ -122,19 +126,25 @@ class ViewWarp(torch.nn.Module):
         Returns:
             (B, T, C, H, W) synthesized views.
         """
-        s, b, t, h, w = maps.src_x.shape
-        c = views.shape[2]
+        s, b, _, h, w = maps.src_x.shape
+        sources = list(views.unbind(0)) if isinstance(views, torch.Tensor) else list(views)
+        if len(sources) != s:
+            raise ValueError(f"views must hold the maps' S = {s} seed views, got {len(sources)}")
+        c, dtype = sources[0].shape[1], sources[0].dtype
         if masks is not None:
             if masks.shape != (s, b, h, w):
                 raise ValueError(
                     f"masks must have shape (S, B, H, W) = {(s, b, h, w)}, got {tuple(masks.shape)}"
                 )
-            m = (masks.to(views.device) != 0).to(views.dtype)[:, :, None]
-            views = torch.cat([views * m, m], dim=2)  # the mask rides along: one warp for both
-        warped = _sample_views(views, maps.src_x, maps.src_y)  # (S, B, T, C', H, W)
-        out = views.new_zeros(b, t, views.shape[2], h, w)
-        for i in range(s):
-            out = out + maps.weight[i].to(views.dtype)[:, :, None] * warped[i]
+            m = (masks.to(sources[0].device) != 0).to(dtype)[:, :, None]
+            # The mask rides along: one warp for both.
+            sources = [torch.cat([v * m[i], m[i]], dim=1) for i, v in enumerate(sources)]
+        warped = _sample_views(sources, maps.src_x, maps.src_y)  # S of (B, T, C', H, W)
+        # Weighted in place: the samples are this call's own temporaries.
+        out = warped[0].mul_(maps.weight[0].to(dtype)[:, :, None])
+        for i in range(1, s):
+            out.add_(warped[i].mul_(maps.weight[i].to(dtype)[:, :, None]))
+        out = out.contiguous()
         if masks is None:
             return out
         return _renormalize(out[:, :, :c], out[:, :, c:])
@@ -193,29 +203,31 @@ class ViewWarp(torch.nn.Module):
             masks = (masks[:, None] if unbatched else masks).to(v1.device)
         corr = correspondence.to(device=v1.device)
         maps = self.maps(corr, thetas, n_sources=len(views))
-        out = self.apply_maps(maps, torch.stack(views), masks)
+        out = self.apply_maps(maps, views, masks)
         return out[0] if unbatched else out
 
 
-def _sample_views(views: torch.Tensor, src_x: torch.Tensor, src_y: torch.Tensor | None) -> torch.Tensor:
-    """Bilinear samples of the seed views at the maps, all sources and angles in one call.
+def _sample_views(
+    views: list[torch.Tensor], src_x: torch.Tensor, src_y: torch.Tensor | None
+) -> list[torch.Tensor]:
+    """Bilinear samples of the seed views at the maps, all angles of a source in one call.
 
     kornia's ``remap`` per source, without its per-call overhead and without T copies of
-    each seed: the T angles' points go into one grid per (source, object), (S·B, T·H, W),
+    each seed: the T angles' points go into one grid per (source, object), (B, T·H, W),
     so a seed image is read in place. The coordinates are normalized with kornia's
     formula (``2 / (W - 1)`` times the pixel, minus 1) and sampled with zero padding and
     ``align_corners=True``, so the samples equal ``remap``'s bit for bit.
 
     Args:
-        views: (S, B, C, H, W) seed images.
+        views: the S seed images, (B, C, H, W) each.
         src_x: (S, B, T, H, W) source columns; ``src_y`` the same rows, or None (own row).
 
     Returns:
-        (S, B, T, C, H, W) samples.
+        S samples, (B, T, C, H, W) each.
     """
-    s, b, c, h, w = views.shape
+    b, _, h, w = views[0].shape
     t = src_x.shape[2]
-    dtype, device = views.dtype, views.device
+    dtype, device = views[0].dtype, views[0].device
     one = torch.ones((), dtype=dtype, device=device)
     # kornia's normalize_pixel_coordinates: the factor is a division in the views' dtype.
     fx = one if w == 1 else 2.0 / (one * w - 1.0)
@@ -223,20 +235,23 @@ def _sample_views(views: torch.Tensor, src_x: torch.Tensor, src_y: torch.Tensor 
     ox, oy = (0.0 if w == 1 else 1.0), (0.0 if h == 1 else 1.0)
     ys = torch.arange(h, dtype=dtype, device=device).view(h, 1) if src_y is None else src_y.to(dtype)
     xs = src_x.to(dtype)
-    if torch.is_grad_enabled() and (xs.requires_grad or ys.requires_grad):
-        grid = torch.stack([xs * fx - ox, (ys * fy - oy).expand_as(xs)], dim=-1)
+    gy = ys * fy - oy
+    if dtype in (torch.float32, torch.float64) and not (
+        torch.is_grad_enabled() and (xs.requires_grad or gy.requires_grad)
+    ):
+        # The (x, y) pairs interleaved by a complex tensor in one pass (writing each half
+        # of an empty grid is a slower strided pass each), then x normalized in place: the
+        # grid is the only full-size buffer, which keeps a call's peak of memory low.
+        grid = torch.view_as_real(torch.complex(xs, gy.expand_as(xs)))
+        gx = grid[..., 0]
+        torch.mul(gx, fx, out=gx).sub_(ox)
     else:
-        grid = views.new_empty(s, b, t, h, w, 2)
-        torch.mul(xs, fx, out=grid[..., 0]).sub_(ox)
-        if src_y is None:
-            grid[..., 1] = ys * fy - oy
-        else:
-            torch.mul(ys, fy, out=grid[..., 1]).sub_(oy)
-    out = F.grid_sample(
-        views.reshape(s * b, c, h, w),
-        grid.view(s * b, t * h, w, 2),
-        mode="bilinear",
-        padding_mode="zeros",
-        align_corners=True,
-    )
-    return out.view(s, b, c, t, h, w).transpose(2, 3)
+        grid = torch.stack([xs * fx - ox, gy.expand_as(xs)], dim=-1)
+    return [
+        F.grid_sample(
+            v, grid[i].view(b, t * h, w, 2), mode="bilinear", padding_mode="zeros", align_corners=True
+        )
+        .view(b, v.shape[1], t, h, w)
+        .transpose(1, 2)
+        for i, v in enumerate(views)
+    ]

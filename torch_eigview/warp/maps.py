@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from torch_eigview.geometry.correspondence import Correspondence
-from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
+from torch_eigview.geometry.row_maps import invert_row_map, invert_row_segments
 
 __all__ = ["RowGeometry", "WarpMaps"]
 
@@ -189,19 +189,25 @@ class RowGeometry:
         """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
         in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
         c, al, th = self.c, self.alpha, self.theta
-        big_x = (x1 - c)[:, None]
-        big_z = ((x2 - c)[:, None] - big_x * math.cos(al)) / math.sin(al)
-        dst_x_for_src = c + self.a * (x1 - c)[:, None] + self.b * (x2 - c)[:, None]
-        depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        b, h, w = x1.shape
         # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
         # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
         other = self.a if second else self.b
-        base_valid, valid = valid, valid[:, None] | (other == 0)
-        src_x, hit = invert_row_map(dst_x_for_src, valid, depth, self.max_stretch)
+        own = other == 0
         # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
         scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
-        cols = torch.arange(x1.shape[-1], dtype=x1.dtype, device=x1.device)
-        src_x = fill_row_holes(src_x, hit, (c + (cols - c) * scale).expand_as(src_x))
+        cols = torch.arange(w, dtype=x1.dtype, device=x1.device)
+        fallback = (c + (cols - c) * scale).expand(b, th.shape[1], h, w)
+        inverse = None if bool(own.any()) else self._segment_inverse(x1, x2, valid, fallback)
+        if inverse is None:
+            big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
+            big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
+            dst_x_for_src = c + self.a * big_x + self.b * x2c
+            depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+            inverse = invert_row_map(
+                dst_x_for_src, valid[:, None] | own, depth, self.max_stretch, fallback=fallback
+            )
+        src_x, hit = inverse
         if self.tilt == 0.0:
             return src_x, None, hit
         # The 2D displacement (dst_x - grid, dy) is linear in the grid's centred column G and
@@ -217,7 +223,65 @@ class RowGeometry:
             -self.tilt * (dcos * z_d / math.sin(al) - dsin * x_d),
         )
         disparity = x1 - x2 if second else x2 - x1
-        return _refine_2d(src_x, disparity, coef, c, base_valid, other == 0)
+        return _refine_2d(src_x, disparity, coef, c, valid, own)
+
+    def _segment_inverse(
+        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, fallback: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """The inverse map of :meth:`source_maps` from the forward map at the valid pixel
+        pairs alone (:func:`invert_row_segments`), or None where at least half the pairs
+        are valid (a textured view: the whole-grid map costs less than the gathers). An
+        object on a background has most pixels invalid, and Eq. 2 is then evaluated on its
+        segments only, with the same expressions, so the result equals the whole-grid one."""
+        pairs = valid[..., :-1] & valid[..., 1:]
+        if x1.shape[-1] < 2 or 2 * int(pairs.count_nonzero()) >= pairs.numel():
+            return None
+        b, h, w = x1.shape
+        shape = (b, self.theta.shape[1], h, w)
+        return invert_row_segments(
+            *self._segment_ends(x1, x2, pairs), shape, self.max_stretch, fallback=fallback
+        )
+
+    def _segment_ends(
+        self, x1: torch.Tensor, x2: torch.Tensor, pairs: torch.Tensor
+    ) -> tuple[
+        torch.Tensor, torch.Tensor, tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]
+    ]:
+        """Rows, left columns, forward map and depth at both ends of every valid pixel pair
+        (``pairs``, (B, H, W - 1)) for every angle: the arguments of :func:`invert_row_segments`.
+        A function of its own so that its index and coefficient arrays are freed on return."""
+        b, h, w = x1.shape
+        t = self.theta.shape[1]
+        bi, hi, ki = pairs.nonzero().unbind(1)
+        # Each valid pair once per angle: (T, P), the angle's coefficients per object. The
+        # arithmetic runs in place where it can: fewer large temporaries per call.
+        bt = bi if t == 1 else (bi * t + torch.arange(t, device=bi.device)[:, None]).reshape(-1)
+        a, b_, cos_th, sin_th = (
+            v.expand(b, t, 1, 1).reshape(-1).index_select(0, bt).view(t, -1)
+            for v in (self.a, self.b, torch.cos(self.theta), torch.sin(self.theta))
+        )
+        sign = self.sign.reshape(-1).index_select(0, bi)
+        c, al = self.c, self.alpha
+        left = (bi * h).add_(hi).mul_(w).add_(ki)
+
+        def take(x: torch.Tensor, at: torch.Tensor, col: torch.Tensor) -> torch.Tensor:
+            # The pixel grid of the source view is one row expanded: read from the row.
+            if x.stride(0) == 0 and x.stride(1) == 0:
+                return x[0, 0].index_select(0, col)
+            return x.reshape(-1).index_select(0, at)
+
+        def ends(at: torch.Tensor, col: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            # Eq. 2's expressions of source_maps, operation for operation.
+            big_x, x2c = take(x1, at, col).sub_(c), take(x2, at, col).sub_(c)
+            big_z = big_x * math.cos(al)
+            torch.sub(x2c, big_z, out=big_z).div_(math.sin(al))
+            dst = (a * big_x).add_(c).add_(b_ * x2c)
+            depth = (big_z * cos_th).sub_(big_x * sin_th).mul_(sign)
+            return dst.reshape(-1), depth.reshape(-1)
+
+        (f0, d0), (f1, d1) = ends(left, ki), ends(left + 1, ki + 1)
+        row = (bt.view(t, -1) * h).add_(hi).reshape(-1)
+        return row, ki.repeat(t), (f0, f1), (d0, d1)
 
     def maps(
         self,
@@ -250,9 +314,10 @@ class RowGeometry:
         )
         # Where both views see a pixel the nearer one in angle weighs more; where one is
         # occluded the other is used alone; where neither sees it, the angular weights.
-        both, neither = hit1 & hit2, ~hit1 & ~hit2
-        w1 = torch.where(both | neither, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype))
+        # Written in place: the stacked weights need no copies of the two halves. Both or
+        # neither seeing a pixel is hit1 == hit2.
+        weight = src1.new_empty((2, *src1.shape))
+        torch.where(hit1 == hit2, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype), out=weight[0])
+        torch.sub(1, weight[0], out=weight[1])
         src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
-        return WarpMaps(
-            torch.stack([src1, src2]), torch.stack([w1, 1 - w1]), torch.stack([hit1, hit2]), thetas, src_y
-        )
+        return WarpMaps(torch.stack([src1, src2]), weight, torch.stack([hit1, hit2]), thetas, src_y)

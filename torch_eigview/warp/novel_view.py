@@ -138,7 +138,8 @@ class NovelViewWarp(ViewWarp):
         shape = (1 if theta.ndim == 1 else b_objects, theta.shape[-1], 1, 1)
         a, b = (v.to(dtype=dtype, device=device).view(shape) for v in (a, b))
         th = torch.deg2rad(theta).to(dtype=dtype, device=device).view(shape)
-        cols = torch.arange(w, dtype=dtype, device=device).expand_as(d12)
+        cols = torch.arange(w, dtype=dtype, device=device)
+        # x - c of view 1 as a (W,) row, broadcast by the arithmetic rather than expanded.
         sign = self._depth_sign(cols - c, cols + d12 - c, correspondence.valid_12)
         geo = RowGeometry(a, b, th, c, math.radians(self.alpha), sign, self.max_stretch, self._tilt)
         return geo.maps(correspondence, theta, self._share_of_second(th), n_sources)
@@ -161,12 +162,13 @@ class NovelViewWarp(ViewWarp):
         return math.sin(math.radians(self.elevation))
 
     def _depth_sign(self, xa: torch.Tensor, xb: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-        """(B, 1, 1, 1) sign that makes depth point towards the camera."""
+        """(B, 1, 1, 1) sign that makes depth point towards the camera; ``xb`` and ``valid``
+        are (B, H, W), ``xa`` broadcasts to them."""
         if self.depth_sign != "auto":
             return torch.full(
-                (xa.shape[0], 1, 1, 1), float(self.depth_sign), dtype=xa.dtype, device=xa.device
+                (xb.shape[0], 1, 1, 1), float(self.depth_sign), dtype=xb.dtype, device=xb.device
             )
         al = math.radians(self.alpha)
         z = (xb - xa * math.cos(al)) / math.sin(al)
-        mean_z = (z * valid).sum(dim=(-1, -2)) / valid.sum(dim=(-1, -2)).clamp_min(1)
-        return torch.where(mean_z >= 0, 1.0, -1.0).to(xa.dtype).view(-1, 1, 1, 1)
+        mean_z = (z * valid).sum(dim=(-1, -2)) / valid.count_nonzero(dim=(-1, -2)).clamp_min(1)
+        return torch.where(mean_z >= 0, 1.0, -1.0).to(xb.dtype).view(-1, 1, 1, 1)
