@@ -34,10 +34,10 @@ def angle_range(start: float, stop: float, step: float, name: str) -> list[float
         >>> angle_range(-10.0, 10.0, 5.0, "test")
         [-10.0, -5.0, 0.0, 5.0, 10.0]
     """
-    if not all(math.isfinite(v) for v in (start, stop, step)):
+    if not (step > 0 and math.isfinite(step)):
+        raise ValueError(f"{name} step must be positive, got {step} (a finite number > 0)")
+    if not (math.isfinite(start) and math.isfinite(stop)):
         raise ValueError(f"{name} must be finite numbers, got start={start}, stop={stop}, step={step}")
-    if not step > 0:
-        raise ValueError(f"{name} step must be positive, got {step}")
     if stop < start:
         raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
     check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
