@@ -43,7 +43,7 @@ from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
 from torch_eigview.warp.base import BLENDS
-from torch_eigview.warp.normalize import foreground_mask, normalize_extent, resolve_extent, seed_foreground
+from torch_eigview.warp.normalize import normalize_extent, resolve_extent, seed_foreground
 from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
@@ -367,7 +367,8 @@ def synthesize_views(
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1
     masks = None if masks is None else seed_foreground(seeds, masks, opts.background, require_object=True)
-    extent = resolve_extent(opts.extent, seed_foreground(seeds, masks, opts.background))
+    foreground = seed_foreground(seeds, masks, opts.background)  # (V, H, W): the masks, else the threshold
+    extent = resolve_extent(opts.extent, foreground)
     if geometry is None:
         geometry = pair_geometry(seeds, alpha, opts, masks)
     elif len(geometry) != n_pairs:
@@ -385,7 +386,7 @@ def synthesize_views(
         )
         maps = warp.maps(geo.correspondence, theta[sel] - starts[n])
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
-        fg = foreground_mask(pair_seeds, opts.background) if masks is None else masks[n : n + 2, None]
+        fg = foreground[n : n + 2, None]
         sil = fg if opts.silhouette else None
         if extent:
             # The foreground mask rides along as one more channel: one warp for both.

@@ -81,7 +81,7 @@ def test_idle_cpus_and_product_threads_read_the_kernel_counters(
     stat = tmp_path / "stat"
     _stat(stat, (100, 100), (100, 100))
     # Over the sample each CPU goes from (100 busy, 100 idle) ticks to cpu0 / cpu1.
-    monkeypatch.setattr(thread_policy, "_allowed_cpus", lambda: [0, 1])
+    monkeypatch.setattr(thread_policy, "allowed_cpus", lambda: [0, 1])
     monkeypatch.setattr(thread_policy.time, "sleep", lambda _: _stat(stat, cpu0, cpu1))
     assert thread_policy.idle_cpus(0.01, stat=stat) == pytest.approx(idle)
     monkeypatch.setattr(thread_policy, "idle_cpus", lambda interval: idle)
@@ -89,7 +89,7 @@ def test_idle_cpus_and_product_threads_read_the_kernel_counters(
 
 
 def test_idle_cpus_without_kernel_counters_counts_every_cpu(tmp_path: Path) -> None:
-    assert thread_policy.idle_cpus(0.01, stat=tmp_path / "missing") == len(thread_policy._allowed_cpus())
+    assert thread_policy.idle_cpus(0.01, stat=tmp_path / "missing") == len(thread_policy.allowed_cpus())
     with pytest.raises(ValueError, match="interval"):
         thread_policy.idle_cpus(0.0)
 

@@ -319,14 +319,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
         _skip(skipped, message)
     entries = list(manifest)
     if args.exclude_seeds:
+        from torch_eigview.geometry.angles import wrap_angle
+
         if "seed_azimuths" not in meta:
             raise ValueError(
                 f"--exclude-seeds needs the seed azimuths that eigview fit records; {args.model} has none"
             )
         seeds = [float(a) for a in meta["seed_azimuths"]]
-        entries = [
-            e for e in entries if not any(abs((e.azimuth - a + 180.0) % 360.0 - 180.0) <= 1e-6 for a in seeds)
-        ]
+        entries = [e for e in entries if not any(abs(wrap_angle(e.azimuth - a)) <= 1e-6 for a in seeds)]
         if not entries:
             raise ValueError(
                 f"--exclude-seeds leaves no view of {manifest.name}: every view lies at a seed azimuth "

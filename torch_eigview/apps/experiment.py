@@ -51,6 +51,7 @@ from torch_eigview.check import (
 )
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
+from torch_eigview.geometry.angles import wrap_angle
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions, synthesize_views
 
@@ -221,7 +222,7 @@ class CoilExperiment:
     def _center(self) -> float:
         """``center`` wrapped to (-180, 180] in float64: poses then stay exact in the views'
         float32 (1e9 degrees would not)."""
-        return 180.0 - (180.0 - float(self.center)) % 360.0
+        return wrap_angle(self.center)
 
     def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
         return folder.images(obj, [self._center + n * self.alpha for n in range(self.views)])

@@ -154,11 +154,6 @@ def _rate_arg(text: str) -> float:
     return value
 
 
-def _wrap(angle: float) -> float:
-    """An angle in degrees wrapped to (-180, 180], in float64."""
-    return 180.0 - (180.0 - float(angle)) % 360.0
-
-
 def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, float]) -> SeedPlan:
     """The seed azimuths and gallery angles of ``--seeds``, ``--center`` and ``--synth``.
 
@@ -167,7 +162,7 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
             azimuth; a bad ``--synth`` range.
     """
     from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
-    from torch_eigview.geometry.angles import angle_range
+    from torch_eigview.geometry.angles import angle_range, wrap_angle
 
     start, stop, step = synth
     angle_range(start, stop, step, "--synth")  # names a bad range before any image is read
@@ -180,8 +175,8 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
             )
         check_limit(m, "--seeds", "seed views round the circle", *VIEW_LIMIT)
         azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
-        return SeedPlan(azimuths, _wrap(center), 360.0 / m, None, step)
-    steps = [_wrap(b - a) for a, b in itertools.pairwise(seeds)]
+        return SeedPlan(azimuths, wrap_angle(center), 360.0 / m, None, step)
+    steps = [wrap_angle(b - a) for a, b in itertools.pairwise(seeds)]
     if any(abs(s) < _TOL for s in steps):
         raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")
     if any(abs(abs(s) - 180.0) < _TOL for s in steps):
@@ -194,11 +189,13 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
     extra = (len(steps) - 1) * steps[0] if equal else sum(steps[1:])
     thetas = angle_range(start + min(extra, 0.0), stop + max(extra, 0.0), step, "--synth")
     alpha: float | list[float] = steps[0] if equal else steps
-    return SeedPlan([a % 360.0 for a in seeds], _wrap(seeds[0]), alpha, thetas, step)
+    return SeedPlan([a % 360.0 for a in seeds], wrap_angle(seeds[0]), alpha, thetas, step)
 
 
 def _same_pose(a: float, b: float) -> bool:
-    return abs(_wrap(a - b)) <= _TOL
+    from torch_eigview.geometry.angles import wrap_angle
+
+    return abs(wrap_angle(a - b)) <= _TOL
 
 
 def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[ViewEntry]:

@@ -30,7 +30,7 @@ from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
-from torch_eigview.scale.thread_policy import for_products
+from torch_eigview.scale.thread_policy import eigen_flops, for_products
 
 __all__ = [
     "Score",
@@ -94,8 +94,7 @@ def fit_projection(
     c, h, w = views.shape[1:]
     x_fit = unit_rows(views) if unit_norm else views.flatten(1)
     if kernel is None:
-        n, p = x_fit.shape
-        with for_products(min(n, p) ** 2 * max(n, p)):  # the Gram or scatter product
+        with for_products(eigen_flops(*x_fit.shape)):
             space = Eigenspace(components).fit(x_fit)
         return EigenProjection(
             space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=unit_norm

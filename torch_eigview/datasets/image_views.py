@@ -20,13 +20,10 @@ from torch.utils.data import Dataset
 from torch_eigview.check import SIDE_LIMIT, check_int, check_limit
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.manifest import ViewManifest
-from torch_eigview.io.foreground import colour_in_channels
+from torch_eigview.io.foreground import LUMA_WEIGHTS, colour_in_channels
 from torch_eigview.io.images import read_image, to_unit_float
 
 __all__ = ["ViewDataset", "read_view"]
-
-# ITU-R BT.709 luma, the weights of skimage.color.rgb2gray.
-_LUMA = (0.2125, 0.7154, 0.0721)
 
 
 def _check_size(size: object) -> tuple[int, int] | None:
@@ -231,6 +228,6 @@ def _convert(image: torch.Tensor, channels: int | None) -> torch.Tensor:
     if channels == 3 and image.shape[0] == 1:
         return image.expand(3, -1, -1).clone()
     if channels == 1 and image.shape[0] == 3:
-        weights = torch.tensor(_LUMA, dtype=image.dtype).view(3, 1, 1)
+        weights = torch.tensor(LUMA_WEIGHTS, dtype=image.dtype).view(3, 1, 1)
         return (image * weights).sum(0, keepdim=True).clamp(0.0, 1.0)
     return image

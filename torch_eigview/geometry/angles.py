@@ -8,7 +8,17 @@ import torch
 
 from torch_eigview.check import VIEW_LIMIT, check_limit
 
-__all__ = ["angle_range", "wrap_degrees"]
+__all__ = ["angle_range", "wrap_angle", "wrap_degrees"]
+
+
+def wrap_angle(angle: float) -> float:
+    """One angle in degrees wrapped to (-180, 180], in float64 (:func:`wrap_degrees` for tensors).
+
+    Example:
+        >>> wrap_angle(190.0), wrap_angle(-180.0), wrap_angle(365.0)
+        (-170.0, 180.0, 5.0)
+    """
+    return 180.0 - (180.0 - float(angle)) % 360.0
 
 
 def wrap_degrees(angles: torch.Tensor) -> torch.Tensor:

@@ -23,7 +23,15 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["LUMA", "Colour", "background_colours", "clean_mask", "colour_in_channels", "estimate_foreground"]
+__all__ = [
+    "LUMA",
+    "LUMA_WEIGHTS",
+    "Colour",
+    "background_colours",
+    "clean_mask",
+    "colour_in_channels",
+    "estimate_foreground",
+]
 
 Colour = tuple[np.ndarray, float]
 """A background colour ``(C,)`` float32 and its tolerance (Euclidean over the channels)."""
@@ -35,8 +43,9 @@ _MIN_TOLERANCE = 0.02
 _MIN_COLOUR_SHARE = 0.05
 
 
-# ITU-R BT.709 luma, the weights of skimage.color.rgb2gray (as the images' conversion).
-LUMA = np.array([0.2125, 0.7154, 0.0721], dtype=np.float32)
+#: ITU-R BT.709 luma, the weights of skimage.color.rgb2gray (RGB to gray wherever views are read).
+LUMA_WEIGHTS = (0.2125, 0.7154, 0.0721)
+LUMA = np.array(LUMA_WEIGHTS, dtype=np.float32)
 
 
 def colour_in_channels(colour: Sequence[float], channels: int) -> tuple[float, ...]:

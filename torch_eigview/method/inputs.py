@@ -27,7 +27,7 @@ from torch_eigview.check import (
 )
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
-from torch_eigview.warp.normalize import box_fill, foreground_mask, seed_foreground
+from torch_eigview.warp.normalize import FILLED_FRAME, box_fill, foreground_mask, seed_foreground
 
 __all__ = [
     "ALL_COMPONENTS",
@@ -44,9 +44,6 @@ __all__ = [
     "warn_unnormalized_seeds",
     "wrap_degrees",
 ]
-
-UNNORMALIZED_FILL = 0.9
-"""Below this fraction of the frame, a seed view's object is taken as not size-normalized."""
 
 ALL_COMPONENTS = math.nextafter(1.0, 0.0)
 """The energy fraction ``n_components=None`` stands for: every component above rounding.
@@ -228,7 +225,7 @@ def warn_unnormalized_seeds(objects: list[torch.Tensor], options: SynthesisOptio
     if options.extent is not True:
         return
     fills = torch.cat([box_fill(foreground_mask(v, options.background)) for v in objects])
-    if float(fills.min()) < UNNORMALIZED_FILL:
+    if float(fills.min()) < FILLED_FRAME:  # what extent="auto" would not normalize
         warnings.warn(
             f"options.extent=True size-normalizes the synthesized views, but a seed view's object "
             f"(pixels above background={options.background}) fills only {float(fills.min()):.0%} of "

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import os
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -27,16 +26,15 @@ import torch
 import torch.multiprocessing as mp
 
 from torch_eigview.check import as_angle_tensor, check_int
+from torch_eigview.scale.thread_policy import allowed_cpus
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_seeds, synthesize_views
 
 __all__ = ["available_cpus", "synthesize_objects"]
 
 
 def available_cpus() -> int:
-    """The CPUs this process may run on (its affinity mask where the OS has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1  # pragma: no cover - macOS / Windows
+    """The number of CPUs this process may run on (its affinity mask where the OS has one)."""
+    return len(allowed_cpus())
 
 
 def _init_worker() -> None:

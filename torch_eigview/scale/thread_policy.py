@@ -39,7 +39,9 @@ from torch_eigview.check import check_int, check_limit, check_positive
 __all__ = [
     "PRODUCT_FLOPS",
     "THREADS_DEFAULT",
+    "allowed_cpus",
     "default_threads",
+    "eigen_flops",
     "for_products",
     "idle_cpus",
     "product_threads",
@@ -77,7 +79,8 @@ def resolve_threads(n: int | None) -> int:
     return count
 
 
-def _allowed_cpus() -> list[int]:
+def allowed_cpus() -> list[int]:
+    """The ids of the CPUs this process may run on (its affinity mask where the OS has one)."""
     if hasattr(os, "sched_getaffinity"):
         return sorted(os.sched_getaffinity(0))
     return list(range(os.cpu_count() or 1))  # pragma: no cover - macOS / Windows
@@ -121,7 +124,7 @@ def idle_cpus(interval: float = 0.1, *, stat: str | os.PathLike[str] = "/proc/st
         )
     if os.path.exists(stat) and not os.path.isfile(stat):  # a FIFO would block the read forever
         raise ValueError(f"stat={os.fspath(stat)!r} must be a regular file (the kernel's /proc/stat)")
-    cpus = _allowed_cpus()
+    cpus = allowed_cpus()
     first = _idle_ticks(Path(stat), cpus)
     if first is None:
         return float(len(cpus))
@@ -130,6 +133,12 @@ def idle_cpus(interval: float = 0.1, *, stat: str | os.PathLike[str] = "/proc/st
     if second is None or second[1] <= first[1]:
         return float(len(cpus))
     return len(cpus) * (second[0] - first[0]) / (second[1] - first[1])
+
+
+def eigen_flops(n_views: int, n_features: int) -> int:
+    """Multiply-adds of an exact eigenspace fit of ``n_views`` views of ``n_features`` values:
+    the Gram matrix (P < N) or the scatter matrix (N <= P), min² · max."""
+    return min(n_views, n_features) ** 2 * max(n_views, n_features)
 
 
 def product_threads(interval: float = 0.1) -> int:
@@ -143,7 +152,7 @@ def product_threads(interval: float = 0.1) -> int:
         and at most the CPUs this process may use.
     """
     idle = idle_cpus(interval)
-    return max(1, min(len(_allowed_cpus()), int(idle + 0.3)))
+    return max(1, min(len(allowed_cpus()), int(idle + 0.3)))
 
 
 @contextmanager
