@@ -46,6 +46,7 @@ from torch_eigview.check import (
     check_number,
 )
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
+from torch_eigview.geometry.sgm import aggregate, winner
 
 __all__ = ["COSTS", "match_rows"]
 
@@ -70,12 +71,19 @@ def _features(gray: torch.Tensor, cost: str) -> torch.Tensor:
 def _box(x: torch.Tensor, patch: int) -> torch.Tensor:
     """Mean over a ``patch`` x ``patch`` window of each (.., H, W) image, edges replicated."""
     shape = x.shape
-    flat = x.reshape(-1, 1, *shape[-2:])
+    h, w = shape[-2:]
     r = patch // 2
-    flat = F.pad(flat, (r, r, r, r), mode="replicate")
-    # Separable: a row mean then a column mean, 2·patch additions per pixel, not patch².
-    flat = F.avg_pool2d(F.avg_pool2d(flat, (1, patch), stride=1), (patch, 1), stride=1)
-    return flat.reshape(shape)
+    padded = F.pad(x.reshape(-1, 1, h, w), (r, r, r, r), mode="replicate")[:, 0]
+    # Separable, as shifted sums: a row mean then a column mean, 2·patch additions per pixel
+    # (avg_pool2d's CPU kernel is several times slower on these single-channel stacks).
+    rows = padded[..., :w].clone()
+    for i in range(1, patch):
+        rows += padded[..., i : i + w]
+    rows.div_(patch)  # a mean per pass, as avg_pool2d: the same values bit for bit
+    out = rows[..., :h, :].clone()
+    for i in range(1, patch):
+        out += rows[..., i : i + h, :]
+    return out.div_(patch).reshape(shape)
 
 
 def _epipolar_grid(
@@ -93,11 +101,16 @@ def _epipolar_grid(
     big_y = torch.arange(h, device=dev, dtype=dt)[:, None] - (h - 1) / 2
     a = angles[:, None, None, None]
     tilt, scale, shift = (m[:, None, None, None] for m in model.unbind(1))
-    x2 = center + (1 + scale) * (big_x * torch.cos(a) + k)
-    y2 = (h - 1) / 2 + (1 + scale) * (big_y + tilt * (big_x * torch.sin(a) + k * torch.tan(a / 2))) + shift
-    x2 = x2.expand(-1, -1, h, -1)
+    x2 = center + (1 + scale) * (big_x * torch.cos(a) + k)  # (N, L, 1, W)
+    grid = torch.empty((*x2.shape[:2], h, w, 2), device=dev, dtype=dt)
     # align_corners=True: -1 and 1 are the centres of the first and last pixels.
-    return torch.stack([2 * x2 / max(w - 1, 1) - 1, 2 * y2 / max(h - 1, 1) - 1], dim=-1)
+    grid[..., 0] = 2 * x2 / max(w - 1, 1) - 1
+    # y2 = (h - 1) / 2 + (1 + scale) (Y + tilt (X sin α + k tan(α / 2))) + shift, normalized:
+    # in place on one (N, L, H, W) buffer, the same operations in the same order.
+    y2 = torch.add(tilt * (big_x * torch.sin(a) + k * torch.tan(a / 2)), big_y)
+    y2.mul_(1 + scale).add_((h - 1) / 2).add_(shift).mul_(2).div_(max(h - 1, 1))
+    torch.sub(y2, 1, out=grid[..., 1])
+    return grid
 
 
 def _cost_volume(
@@ -128,9 +141,11 @@ def _cost_volume(
 def _patch_cost(ref: torch.Tensor, warped: torch.Tensor, cost: str, patch: int) -> torch.Tensor:
     """(N, m, H, W) cost of ``ref`` (N, F, H, W) against ``warped`` (N, F, m, H, W)."""
     if cost == "adgrad":
-        diff = (ref[:, :, None] - warped).abs()
+        # |ref - warped| in place in this call's own samples (no volume-sized temporaries).
+        diff = warped.sub_(ref[:, :, None]).abs_()
+        grads = diff[:, 1:].sum(dim=1)
         # Truncated so that a few outliers (occlusions, highlights) do not dominate a patch.
-        return _box(diff[:, 0].clamp(max=0.2) + diff[:, 1:].sum(dim=1).clamp(max=0.2), patch)
+        return _box(diff[:, 0].clamp_(max=0.2).add_(grads.clamp_(max=0.2)), patch)
     a, b = ref[:, 0, None].expand_as(warped[:, 0]), warped[:, 0]
     ma, mb = _box(a, patch), _box(b, patch)
     va = (_box(a * a, patch) - ma * ma).clamp_min(0)
@@ -140,47 +155,6 @@ def _patch_cost(ref: torch.Tensor, warped: torch.Tensor, cost: str, patch: int) 
     # preference, so SGM fills them from their textured neighbours.
     eps = 1e-4
     return 1 - cov / torch.sqrt((va + eps) * (vb + eps))
-
-
-def _aggregate(cost: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
-    """SGM: (N, L, H, W) costs summed over the four row and column paths."""
-    total = torch.zeros_like(cost)
-    for dim in (-1, -2):
-        for reverse in (False, True):
-            total += _path(cost, dim, reverse, p1, p2)
-    return total
-
-
-def _path(cost: torch.Tensor, dim: int, reverse: bool, p1: float, p2: float) -> torch.Tensor:
-    """One SGM path: L_r(p, k) = C(p, k) + min(L_r(p − r, k), L_r(p − r, k ± 1) + P1,
-    min_j L_r(p − r, j) + P2) − min_j L_r(p − r, j)."""
-    c = cost.movedim(dim, 0)
-    if reverse:
-        c = c.flip(0)
-    out = torch.empty_like(c)
-    prev = out[0] = c[0]
-    inf = torch.full_like(prev[:, :1], float("inf"))
-    for t in range(1, c.shape[0]):
-        low = prev.amin(dim=1, keepdim=True)
-        step = torch.minimum(torch.cat([prev[:, 1:], inf], 1), torch.cat([inf, prev[:, :-1]], 1))
-        best = torch.minimum(torch.minimum(prev, step + p1), low + p2)
-        prev = out[t] = c[t] + best - low
-    if reverse:
-        out = out.flip(0)
-    return out.movedim(0, dim)
-
-
-def _winner(volume: torch.Tensor) -> torch.Tensor:
-    """(N, H, W) sub-pixel label (centred: 0 is the middle label) of least cost."""
-    n_labels = volume.shape[1]
-    k = volume.argmin(dim=1, keepdim=True)
-    c0 = volume.gather(1, k)
-    cm = volume.gather(1, (k - 1).clamp(min=0))
-    cp = volume.gather(1, (k + 1).clamp(max=n_labels - 1))
-    curv = cm - 2 * c0 + cp
-    inner = (k > 0) & (k < n_labels - 1) & (curv > 0)
-    delta = torch.where(inner, (cm - cp) / (2 * curv).clamp_min(1e-12), torch.zeros_like(c0))
-    return (k + delta.clamp(-0.5, 0.5) - (n_labels - 1) // 2)[:, 0].to(volume.dtype)
 
 
 def _line_model(
@@ -209,17 +183,18 @@ def _line_model(
     sin_a = angles.abs().sin().max().item()
     n_labels = 2 * math.ceil((depth * sin_a + 0.2 * w / 2) / f) + 1
     reach = math.ceil((0.5 * (w / 2) * (sin_a + 1 - math.cos(math.asin(sin_a))) + 0.2 * h / 2) / f)
+    # Every vertical offset v at once: one cost volume of (2·reach + 1)·L labels, then per
+    # pixel the best label of each offset and the best offset (the first of equal ones).
     shift = torch.zeros(n, 3, device=ref.device, dtype=ref.dtype)
-    cost = torch.full((n, hs, ws), float("inf"), device=ref.device, dtype=ref.dtype)
-    label, dy = torch.zeros_like(cost), torch.zeros_like(cost)
+    grids = []
     for v in range(-reach, reach + 1):
         shift[:, 2] = v
-        grid = _epipolar_grid(n_labels, hs, ws, angles, shift, cs)
-        c_v, l_v = _cost_volume(r, o, grid, "adgrad", 3).min(dim=1)
-        better = c_v < cost
-        cost = torch.where(better, c_v, cost)
-        label = torch.where(better, l_v.to(cost.dtype), label)
-        dy = torch.where(better, torch.full_like(cost, v), dy)
+        grids.append(_epipolar_grid(n_labels, hs, ws, angles, shift, cs))
+    volume = _cost_volume(r, o, torch.cat(grids, dim=1), "adgrad", 3).view(n, -1, n_labels, hs, ws)
+    c_v, l_v = volume.min(dim=2)  # (N, V, hs, ws)
+    best_v = c_v.argmin(dim=1, keepdim=True)
+    label = l_v.gather(1, best_v)[:, 0].to(ref.dtype)
+    dy = (best_v[:, 0] - reach).to(ref.dtype)
     k = label - (n_labels - 1) // 2
     big_x = torch.arange(ws, device=ref.device, dtype=ref.dtype) - cs
     big_y = (torch.arange(hs, device=ref.device, dtype=ref.dtype)[:, None] - (hs - 1) / 2).expand(hs, ws)
@@ -230,14 +205,20 @@ def _line_model(
         target = dy - tilt * basis[0]
         basis = basis[1:]
     textured = r[:, 1:].abs().sum(dim=1) > 0.01
-    design = torch.stack(basis, dim=-1).reshape(n, -1, len(basis))
-    y = target.reshape(n, -1, 1)
-    weight = textured.reshape(n, -1, 1).to(ref.dtype)
+    # The reweighted fits in float64 from elementwise sums (a p x p system per direction):
+    # BLAS's float32 least squares varied in the last bits from run to run (it depends on
+    # the buffers' alignment), and the lines, labels and matches with them.
+    design = torch.stack(basis, dim=-1).reshape(n, -1, len(basis)).double()
+    y = target.reshape(n, -1, 1).double()
+    textured_w = textured.reshape(n, -1, 1).double()
+    weight = textured_w
     for _ in range(6):
-        sw = weight.sqrt()
-        sol = torch.linalg.lstsq(design * sw, y * sw).solution
-        res = (design @ sol - y).abs()
-        weight = textured.reshape(n, -1, 1).to(ref.dtype) / (1 + res.square())
+        wd = design * weight
+        gram = (wd[:, :, :, None] * design[:, :, None, :]).sum(dim=1)
+        sol = torch.linalg.lstsq(gram, (wd * y).sum(dim=1)[..., None]).solution
+        res = ((design * sol[:, None, :, 0]).sum(dim=-1, keepdim=True) - y).abs()
+        weight = textured_w / (1 + res.square())
+    sol = sol.to(ref.dtype)
     sol = sol[..., 0]
     if tilt is not None:
         sol = torch.cat([torch.full_like(sol[:, :1], tilt), sol], dim=1)
@@ -350,7 +331,7 @@ def match_rows(
     n_labels = 2 * math.ceil(reach * abs(math.sin(rad))) + 1
     grid = _epipolar_grid(n_labels, h, w, angles, model, c)
     volume = _cost_volume(ref, torch.cat([ref[b:], ref[:b]]), grid, cost, patch)
-    disparity, vertical = _matches(_winner(_aggregate(volume, p1, p2)), model, angles, c)
+    disparity, vertical = _matches(winner(aggregate(volume, p1, p2)), model, angles, c)
     disparity, vertical = disparity.to(v1.dtype), vertical.to(v1.dtype)
     corr = correspondence_from_disparity(disparity[:b], disparity[b:], threshold=threshold)
     return dataclasses.replace(corr, vertical_12=vertical[:b], vertical_21=vertical[b:])
