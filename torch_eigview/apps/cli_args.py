@@ -145,6 +145,19 @@ def threads_arg(text: str) -> int:
     return value
 
 
+def workers_arg(text: str) -> int | str:
+    """``--workers N|auto``: an int >= 0, or ``auto`` (argparse type)."""
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"--workers must be 'auto' or an integer >= 0, got {text!r}")
+    return value
+
+
 def add_threads(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--threads",

@@ -7,6 +7,7 @@ folder of ``obj{O}__{P}.png`` images in, a per-object accuracy table out.
 from __future__ import annotations
 
 import argparse
+import math
 from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
@@ -18,13 +19,15 @@ from torch_eigview.apps.cli_args import (
     gamma_arg,
     objects_arg,
     progress_bar,
+    workers_arg,
 )
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
     import torch
 
-    from torch_eigview.apps.experiment import CoilResult
+    from torch_eigview.apps.experiment import CoilExperiment, CoilResult
+    from torch_eigview.datasets.coil import CoilFolder
     from torch_eigview.synthesis import SynthesisOptions
 
 __all__ = ["add_coil_command", "add_synthesis_arguments", "format_table", "run_coil", "synthesis_options"]
@@ -126,6 +129,15 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         default="cpu",
         help="where the views, the warp, the eigenspace and recognition run (the optical flow "
         "stays on the CPU: scikit-image)",
+    )
+    coil.add_argument(
+        "--workers",
+        type=workers_arg,
+        default="auto",
+        metavar="N",
+        help="worker processes that synthesize the objects (one torch thread each); auto "
+        "(default): one per CPU when the synthesis is large enough to repay their start-up "
+        "(the full circle), else none",
     )
     add_quiet(coil)
     add_threads(coil)
@@ -253,6 +265,7 @@ def run_coil(args: argparse.Namespace) -> int:
         interpolate_pose=args.pose == "interpolate",
         overlap=0.0 if args.overlap is None else args.overlap,
     )
+    experiment.workers = _workers(args, experiment, folder)
     if args.seeds is not None:
         experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
     if args.kernel and args.save:
@@ -273,6 +286,24 @@ def run_coil(args: argparse.Namespace) -> int:
         meta = {"command": "coil", "alpha": args.alpha, "method": args.method, "accuracy": result.accuracy}
         save_recognizer(args.save, result.recognizer, meta)
     return 0
+
+
+def _workers(args: argparse.Namespace, experiment: CoilExperiment, folder: CoilFolder) -> int:
+    """``--workers``: the number given, or for ``auto`` :func:`object_workers`'s choice."""
+    from torch_eigview.scale.parallel import object_workers
+
+    if args.workers != "auto":
+        return int(args.workers)
+    if experiment.method != "nvs" or folder.device.type != "cpu":
+        return 0
+    objects = folder.objects if args.objects is None else args.objects
+    per_object = (
+        math.ceil(360.0 / experiment.synth[2])  # the full circle, every synth step
+        if experiment.seeds is not None
+        else len(experiment.synth_angles())
+    )
+    first = folder.image(objects[0], folder.poses(objects[0])[0])
+    return object_workers(per_object * len(objects), first[0].numel(), len(objects))
 
 
 def _device(name: str) -> torch.device:

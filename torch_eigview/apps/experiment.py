@@ -31,6 +31,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 
@@ -38,8 +39,8 @@ from torch_eigview.apps.circle import (
     CircleLayout,
     check_overlap,
     circle_layout,
-    synthesize_circle,
 )
+from torch_eigview.apps.object_synthesis import CaughtWarning, own_views, synthesize_object
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
 from torch_eigview.check import (
     VIEW_LIMIT,
@@ -53,7 +54,12 @@ from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import wrap_angle
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
-from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions, synthesize_views
+from torch_eigview.scale.parallel import map_ordered
+from torch_eigview.synthesis import (
+    ElevationFallbackWarning,
+    SynthesisOptions,
+    SynthesizedViews,
+)
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
@@ -137,6 +143,10 @@ class CoilExperiment:
             not the nearest view's pose.
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
             (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
+        workers: worker processes that synthesize the ``nvs`` galleries, one object each at
+            a time with one torch thread (:func:`~torch_eigview.scale.parallel.map_ordered`);
+            0 (the default) synthesizes in this process. CPU only: a folder on another
+            device synthesizes in this process. The views are the same either way.
     """
 
     alpha: float = 5.0
@@ -156,8 +166,10 @@ class CoilExperiment:
     dense_step: float | None = None
     interpolate_pose: bool = False
     overlap: float = 0.0
+    workers: int = 0
 
     def __post_init__(self) -> None:
+        check_int(self.workers, "workers", minimum=0)
         if self.kernel is not None:
             KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)  # validates both
         elif self.gamma is not None:
@@ -248,49 +260,73 @@ class CoilExperiment:
             check_overlap(self.seeds, self.overlap, "--overlap" if names[0] == "--seeds" else "overlap")
         return layout
 
-    def _gallery_of(
+    def _real_gallery(
+        self, folder: CoilFolder, obj: int, layout: CircleLayout | None
+    ) -> tuple[torch.Tensor, int, list[float]] | None:
+        """``(views, obj, poses)`` of a gallery of real views (``sparse``, ``dense``), None for ``nvs``."""
+        c = self._center
+        if self.method == "nvs":
+            return None
+        if layout is not None:
+            return folder.images(obj, layout.real), obj, layout.real
+        angles = [c + n * self.alpha for n in range(self.views)]
+        if self.method == "dense":
+            angles = [c + a for a in self.synth_angles(5.0)]
+        return folder.images(obj, angles), obj, angles
+
+    def _synthesis_job(
+        self, folder: CoilFolder, obj: int, layout: CircleLayout | None, copy: bool
+    ) -> tuple[Any, ...]:
+        """The arguments of :func:`synthesize_object` for one object's ``nvs`` gallery (the
+        seeds a ``copy`` of the folder's: a worker's share moves the whole storage)."""
+        seeds = folder.images(obj, layout.seeds) if layout is not None else self._seeds(folder, obj)
+        seeds = seeds.clone() if copy else seeds
+        angles = None if layout is not None else self.synth_angles()
+        return seeds, self.alpha, angles, self.synth[2], self.synthesis, self.overlap
+
+    def _synthesized_gallery(
         self,
-        folder: CoilFolder,
         obj: int,
+        outcome: tuple[SynthesizedViews, list[CaughtWarning]] | ValueError,
         seconds: dict[str, float],
         elevations: dict[int, list[float]],
-        layout: CircleLayout | None = None,
     ) -> tuple[torch.Tensor, int, list[float]]:
-        """``(views, obj, poses)`` of one object's gallery; adds the synthesis's times to
-        ``seconds`` and its elevations to ``elevations``."""
-        c = self._center
-        if layout is not None:
-            if self.method != "nvs":
-                return folder.images(obj, layout.real), obj, layout.real
-            seeds = folder.images(obj, layout.seeds)
-        elif self.method == "sparse":
-            angles = [c + n * self.alpha for n in range(self.views)]
-            return folder.images(obj, angles), obj, angles
-        elif self.method == "dense":
-            angles = [c + a for a in self.synth_angles(5.0)]
-            return folder.images(obj, angles), obj, angles
-        else:
-            seeds = self._seeds(folder, obj)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ElevationFallbackWarning)
-            try:
-                if layout is not None:
-                    out = synthesize_circle(seeds, self.synth[2], self.synthesis, overlap=self.overlap)
-                else:
-                    out = synthesize_views(seeds, self.alpha, self.synth_angles(), self.synthesis)
-            except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
-                raise ValueError(f"object {obj}: synthesis failed: {exc}") from exc
-        for w in caught:  # re-issued with the object named (others unchanged)
-            message = (
-                f"object {obj}: {w.message}"
-                if issubclass(w.category, ElevationFallbackWarning)
-                else w.message
-            )
-            warnings.warn_explicit(message, w.category, w.filename, w.lineno)
+        """``(views, obj, poses)`` of one object's synthesized gallery; adds its times to
+        ``seconds`` and its elevations to ``elevations``, and re-issues its warnings."""
+        if isinstance(outcome, ValueError):  # e.g. a flow that cannot match this object's seeds
+            raise ValueError(f"object {obj}: synthesis failed: {outcome}") from outcome
+        out, caught = outcome
+        for message, category, filename, lineno in caught:  # re-issued with the object named
+            if issubclass(category, ElevationFallbackWarning):
+                message = f"object {obj}: {message}"
+            warnings.warn_explicit(message, category, filename, lineno)
         for key, value in out.seconds.items():
             seconds[key] += value
         elevations[obj] = out.elevations
-        return out.views, obj, [c + t for t in out.thetas.tolist()]
+        return out.views, obj, [self._center + t for t in out.thetas.tolist()]
+
+    def _galleries(
+        self,
+        folder: CoilFolder,
+        objects: list[int],
+        ticks: Iterable[int],
+        seconds: dict[str, float],
+        elevations: dict[int, list[float]],
+        layout: CircleLayout | None,
+    ) -> Iterator[tuple[torch.Tensor, int, list[float]]]:
+        """Each object's gallery in turn (``ticks``: ``objects``, or a progress bar over
+        them); the ``nvs`` ones over ``workers`` processes, in order."""
+        if self.method != "nvs":
+            for obj in ticks:
+                real = self._real_gallery(folder, obj, layout)
+                assert real is not None
+                yield real
+            return
+        workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
+        jobs = (self._synthesis_job(folder, obj, layout, copy=workers > 0) for obj in objects)
+        results = map_ordered(synthesize_object, jobs, workers, finish=own_views)
+        for obj, outcome in zip(ticks, results, strict=True):
+            yield self._synthesized_gallery(obj, outcome, seconds, elevations)
 
     def run(
         self,
@@ -313,10 +349,8 @@ class CoilExperiment:
         t_start = time.perf_counter()
         seconds = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0, "recognition": 0.0}
         elevations: dict[int, list[float]] = {}
-        x, labels, poses = stack_gallery(
-            self._gallery_of(folder, obj, seconds, elevations, layout)
-            for obj in (progress(objects) if progress else objects)
-        )
+        ticks = progress(objects) if progress else objects
+        x, labels, poses = stack_gallery(self._galleries(folder, objects, ticks, seconds, elevations, layout))
         t0 = time.perf_counter()
         recognizer = build_recognizer(
             x,

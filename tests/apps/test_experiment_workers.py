@@ -1,0 +1,72 @@
+"""The COIL experiment over worker processes: the same gallery and results as in one
+process, its warnings and errors named by object, and the commands' worker policy."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+
+import torch_eigview.apps.object_synthesis as object_synthesis
+from torch_eigview.apps.cli import main
+from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.scale.parallel import PARALLEL_PIXELS, available_cpus, object_workers
+from torch_eigview.synthesis import ElevationFallbackWarning
+
+
+def test_workers_give_the_same_run(folder: CoilFolder) -> None:
+    """Two spawned workers: the same gallery, eigenspace and scores as in this process,
+    the full circle included (its sectors wrap round)."""
+    for kw in ({"alpha": 10.0}, {"seeds": 4, "synth": (0.0, 0.0, 5.0)}):
+        here = CoilExperiment(objects=[1, 4, 7], **kw).run(folder)  # type: ignore[arg-type]
+        there = CoilExperiment(objects=[1, 4, 7], workers=2, **kw).run(folder)  # type: ignore[arg-type]
+        assert there.accuracy == here.accuracy and there.per_object == here.per_object
+        assert there.elevations == here.elevations and there.n_train_views == here.n_train_views
+        a, b = here.recognizer.state_dict(), there.recognizer.state_dict()
+        assert a.keys() == b.keys()
+        for key in a:
+            same = torch.equal(a[key], b[key]) if isinstance(a[key], torch.Tensor) else a[key] == b[key]
+            assert same, key
+
+
+def test_warnings_and_errors_name_the_object(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A seed pair's elevation fallback is re-issued with its object, and a synthesis that
+    refuses an object's seeds is an error naming it (the path a worker's results take)."""
+    original = object_synthesis.synthesize_views
+
+    def warns(*args: object, **kwargs: object) -> object:
+        warnings.warn(
+            "seed pair 0: elevation='auto' could not be measured", ElevationFallbackWarning, stacklevel=1
+        )
+        return original(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(object_synthesis, "synthesize_views", warns)
+    with pytest.warns(ElevationFallbackWarning, match="object 4: seed pair 0"):
+        CoilExperiment(alpha=10.0, objects=[4]).run(folder)
+
+    def refuses(*args: object, **kwargs: object) -> object:
+        raise ValueError("the flow cannot match these views")
+
+    monkeypatch.setattr(object_synthesis, "synthesize_views", refuses)
+    with pytest.raises(ValueError, match="object 7: synthesis failed: the flow cannot match"):
+        CoilExperiment(alpha=10.0, objects=[7]).run(folder)
+
+
+def test_worker_policy() -> None:
+    """Workers only for a synthesis worth their start-up, at most one per object and CPU."""
+    assert object_workers(820, 128 * 128, 20) == 0  # COIL-20 at one center: 13 M pixels
+    big = object_workers(7200, 128 * 128, 20)  # the full circle, M = 8: 118 M pixels
+    assert big == (available_cpus() if available_cpus() >= 2 else 0)
+    assert object_workers(int(PARALLEL_PIXELS), 1, 1) == 0  # one object: nothing to share
+    assert object_workers(int(PARALLEL_PIXELS), 1, 2) in (0, min(2, available_cpus()))
+
+
+@pytest.mark.parametrize("value", ["-1", "x", "1.5", ""])
+def test_bad_workers_flag(value: str, coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["coil", "--root", str(coil_root), "--alpha", "10", "--workers", value])
+    assert exc.value.code == 2
+    assert f"--workers must be 'auto' or an integer >= 0, got {value!r}" in capsys.readouterr().err

@@ -1,0 +1,67 @@
+"""One object's synthesized gallery as a job for a worker process (or this one).
+
+:class:`~torch_eigview.apps.experiment.CoilExperiment` hands each object's seeds to
+:func:`synthesize_object` through :func:`~torch_eigview.scale.parallel.map_ordered`. A
+worker's warnings would be lost and its errors would name no object, so the job returns
+both for the experiment to re-issue with the object named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import torch
+
+from torch_eigview.apps.circle import synthesize_circle
+from torch_eigview.synthesis import (
+    ElevationFallbackWarning,
+    SynthesisOptions,
+    SynthesizedViews,
+    synthesize_views,
+)
+
+__all__ = ["CaughtWarning", "own_views", "synthesize_object"]
+
+
+#: A warning caught in :func:`synthesize_object`: message, category, file and line.
+CaughtWarning = tuple[str, type[Warning], str, int]
+
+
+def synthesize_object(
+    seeds: torch.Tensor,
+    alpha: float,
+    thetas: list[float] | None,
+    step: float,
+    options: SynthesisOptions,
+    overlap: float,
+) -> tuple[SynthesizedViews, list[CaughtWarning]] | ValueError:
+    """One object's ``nvs`` gallery, in this process or a worker's: the views at ``thetas``
+    from seeds α apart, or with ``thetas`` None the full circle every ``step`` degrees
+    (:func:`~torch_eigview.apps.circle.synthesize_circle`).
+
+    Returns:
+        The views and the warnings raised on the way (a worker's would be lost: the caller
+        re-issues them), or the ``ValueError`` that refused the object's seeds, for the
+        caller to name the object.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ElevationFallbackWarning)
+        try:
+            if thetas is None:
+                out = synthesize_circle(seeds, step, options, overlap=overlap)
+            else:
+                out = synthesize_views(seeds, alpha, thetas, options)
+        except ValueError as exc:
+            return exc
+    return out, [(str(w.message), w.category, w.filename, w.lineno) for w in caught]
+
+
+def own_views(
+    outcome: tuple[SynthesizedViews, list[CaughtWarning]] | ValueError,
+) -> tuple[SynthesizedViews, list[CaughtWarning]] | ValueError:
+    """A worker's views copied out of the shared memory they came in."""
+    if isinstance(outcome, ValueError):
+        return outcome
+    out, caught = outcome
+    return dataclasses.replace(out, views=out.views.clone()), caught
