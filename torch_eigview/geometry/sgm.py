@@ -15,54 +15,48 @@ __all__ = ["aggregate", "winner"]
 def aggregate(cost: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
     """SGM: (N, L, H, W) costs summed over the four row and column paths.
 
-    The paths of one length run as one batch (both directions of the rows, and the
-    columns too when H = W): one scan of fewer, larger steps.
+    Each path is scanned on a layout whose scanned axis is the second-to-last (the rows'
+    paths on one transposed copy of the volume) and adds each step's costs straight into
+    the sum, in the fixed order left-to-right, right-to-left, top-down, bottom-up: no
+    volume per path.
     """
-    paths = [(dim, reverse) for dim in (-1, -2) for reverse in (False, True)]
-    groups: dict[int, list[tuple[int, bool]]] = {}
-    for dim, reverse in paths:
-        groups.setdefault(cost.shape[dim], []).append((dim, reverse))
-    n = cost.shape[0]
-    results = {}
-    for group in groups.values():
-        starts = [cost.movedim(dim, 0) for dim, _ in group]
-        stacked = torch.cat(
-            [c.flip(0) if rev else c for c, (_, rev) in zip(starts, group, strict=True)], dim=1
-        )
-        scanned = _path(stacked, p1, p2)
-        for i, (dim, reverse) in enumerate(group):
-            part = scanned[:, i * n : (i + 1) * n]
-            results[dim, reverse] = (part.flip(0) if reverse else part).movedim(0, dim)
-    total = torch.zeros_like(cost)
-    for key in paths:  # summed in a fixed order: the same total however they were batched
-        total += results[key]
+    across = cost.transpose(-1, -2).contiguous()  # (N, L, W, H): a row path scans axis -2
+    acc = torch.zeros_like(across)
+    _scan(across, acc, False, p1, p2)
+    _scan(across, acc, True, p1, p2)
+    total = acc.transpose(-1, -2).contiguous()
+    del acc, across
+    _scan(cost, total, False, p1, p2)
+    _scan(cost, total, True, p1, p2)
     return total
 
 
-def _path(c: torch.Tensor, p1: float, p2: float) -> torch.Tensor:
-    """SGM paths along the first axis of ``c`` (T, N, L, X): L_r(p, k) = C(p, k) +
-    min(L_r(p − r, k), L_r(p − r, k ± 1) + P1, min_j L_r(p − r, j) + P2) − min_j L_r(p − r, j)."""
-    out = torch.empty_like(c)
-    out[0] = c[0]
+def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: float) -> None:
+    """Adds one SGM path along axis -2 of ``c`` (N, L, S, X) to ``acc`` (same shape):
+    L_r(p, k) = C(p, k) + min(L_r(p − r, k), L_r(p − r, k ± 1) + P1,
+    min_j L_r(p − r, j) + P2) − min_j L_r(p − r, j)."""
+    n, n_labels, s, x = c.shape
+    order = range(s - 1, -1, -1) if reverse else range(s)
     # The previous step's costs between two +inf labels: its label neighbours k ± 1 are
     # slices of one buffer, and each step writes in place (no per-step allocations).
-    padded = torch.full(
-        (c.shape[1], c.shape[2] + 2, *c.shape[3:]), float("inf"), dtype=c.dtype, device=c.device
-    )
+    padded = torch.full((n, n_labels + 2, x), float("inf"), dtype=c.dtype, device=c.device)
     prev = padded[:, 1:-1]
-    prev.copy_(c[0])
     low = torch.empty_like(prev[:, :1])
     step = torch.empty_like(prev)
-    for t in range(1, c.shape[0]):
-        torch.amin(prev, dim=1, keepdim=True, out=low)
-        torch.minimum(padded[:, 2:], padded[:, :-2], out=step)
-        step.add_(p1)
-        torch.minimum(step, prev, out=step)
-        torch.minimum(step, low + p2, out=step)
-        torch.add(c[t], step, out=prev)
-        prev.sub_(low)
-        out[t] = prev
-    return out
+    first = True
+    for t in order:
+        if first:
+            prev.copy_(c[:, :, t])
+            first = False
+        else:
+            torch.amin(prev, dim=1, keepdim=True, out=low)
+            torch.minimum(padded[:, 2:], padded[:, :-2], out=step)
+            step.add_(p1)
+            torch.minimum(step, prev, out=step)
+            torch.minimum(step, low + p2, out=step)
+            torch.add(c[:, :, t], step, out=prev)
+            prev.sub_(low)
+        acc[:, :, t] += prev
 
 
 def winner(volume: torch.Tensor) -> torch.Tensor:
