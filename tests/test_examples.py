@@ -36,6 +36,7 @@ def test_script_imports(path: Path) -> None:
 
 
 COIL_EXAMPLES = [
+    "bench_correspondence",
     "reject_unknown",
     "coil20_recognition",
     "full_circle",
@@ -69,6 +70,13 @@ def test_train_frozen_features(coil_root: Path) -> None:
     )
     assert result["accuracy"] >= 90.0
     assert result["compile_err"] < 1e-4 and result["dtype_err"] < 1e-4
+
+
+@pytest.mark.coil
+def test_bench_correspondence(coil_root: Path) -> None:
+    result = load("bench_correspondence").main(["--root", str(coil_root), "--objects", "1", "--alpha", "20"])
+    seconds = result["seconds_per_pair"]
+    assert set(seconds) == {"tvl1 alpha=20", "rows alpha=20"} and all(v > 0 for v in seconds.values())
 
 
 @pytest.mark.coil
