@@ -296,14 +296,15 @@ def _workers(args: argparse.Namespace, experiment: CoilExperiment, folder: CoilF
         return int(args.workers)
     if experiment.method != "nvs" or folder.device.type != "cpu":
         return 0
-    objects = folder.objects if args.objects is None else args.objects
+    n_objects = len(folder.objects if args.objects is None else args.objects)  # checked by the run
     per_object = (
         math.ceil(360.0 / experiment.synth[2])  # the full circle, every synth step
         if experiment.seeds is not None
         else len(experiment.synth_angles())
     )
-    first = folder.image(objects[0], folder.poses(objects[0])[0])
-    return object_workers(per_object * len(objects), first[0].numel(), len(objects))
+    some = folder.objects[0]  # the folder's images share one size
+    pixels = folder.image(some, folder.poses(some)[0])[0].numel()
+    return object_workers(per_object * n_objects, pixels, n_objects)
 
 
 def _device(name: str) -> torch.device:
