@@ -122,6 +122,20 @@ COIL = [
     _coil("alpha-1e300", "--alpha", "1e300", match=r"alpha=1e\+300 must be an angle .* \[-360, 360\]"),
     _coil("threads-0", *A, "--threads", "0", match=r"--threads.*0"),
     _coil("threads-negative", *A, "--threads", "-2", match=r"--threads.*-2"),
+    _coil(
+        "workers-negative",
+        *A,
+        "--workers",
+        "-1",
+        match=r"--workers must be 'auto' or an integer >= 0, got '-1'",
+    ),
+    _coil(
+        "workers-word",
+        *A,
+        "--workers",
+        "many",
+        match=r"--workers must be 'auto' or an integer >= 0, got 'many'",
+    ),
 ]
 
 # One bad entry in an otherwise good folder: (its name, how it is made, the error expected).
