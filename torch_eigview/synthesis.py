@@ -31,7 +31,6 @@ import torch
 
 from torch_eigview.check import (
     as_angle_tensor,
-    check_alpha,
     check_finite,
     check_float_tensor,
     check_int,
@@ -39,6 +38,7 @@ from torch_eigview.check import (
     check_number,
     check_positive,
 )
+from torch_eigview.geometry.angles import pair_angles, seed_angles
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
@@ -181,7 +181,7 @@ def pair_of(thetas: object, alpha: float | Sequence[float], n_seeds: int) -> tor
         [0, 0, 1, 1]
     """
     n_seeds = check_int(n_seeds, "n_seeds", minimum=2)
-    return _pair_index(as_angle_tensor(thetas, "thetas", dtype=torch.float64), _steps(alpha, n_seeds))
+    return _pair_index(as_angle_tensor(thetas, "thetas", dtype=torch.float64), pair_angles(alpha, n_seeds))
 
 
 def _pair_index(theta: torch.Tensor, steps: list[float]) -> torch.Tensor:
@@ -189,16 +189,8 @@ def _pair_index(theta: torch.Tensor, steps: list[float]) -> torch.Tensor:
     last = len(steps) - 1
     if len(set(steps)) == 1:  # one alpha, either sign
         return torch.clamp(torch.floor(theta.double() / steps[0]), 0, last).long()
-    starts = torch.tensor(_seed_angles(steps), dtype=torch.float64)
+    starts = torch.tensor(seed_angles(steps), dtype=torch.float64)
     return torch.clamp(torch.searchsorted(starts, theta.double(), right=True) - 1, 0, last).long()
-
-
-def _seed_angles(steps: list[float]) -> list[float]:
-    """Angles of the seed views: 0, α_1, α_1 + α_2, …."""
-    out = [0.0]
-    for a in steps:
-        out.append(out[-1] + a)
-    return out
 
 
 @dataclass(frozen=True)
@@ -208,31 +200,6 @@ class PairGeometry:
     correspondence: Correspondence
     elevation: float
     seconds: float
-
-
-def _steps(alpha: object, n_seeds: int) -> list[float]:
-    """Per-pair angles α_n (degrees) of ``n_seeds`` seed views: a number (every pair) or a
-    sequence of ``n_seeds − 1`` positive angles (Sec. 4.1's α_n, seed angles increasing)."""
-    if isinstance(alpha, torch.Tensor):
-        alpha = alpha.detach().reshape(-1).tolist() if alpha.ndim else float(alpha)
-    if isinstance(alpha, Sequence) and not isinstance(alpha, str):
-        if len(alpha) != n_seeds - 1:
-            raise ValueError(
-                f"alpha must hold one angle per consecutive seed pair ({n_seeds} views: {n_seeds - 1} angles), "
-                f"got {len(alpha)}"
-            )
-        steps = [check_alpha(a, f"alpha[{n}]") for n, a in enumerate(alpha)]
-        bad = [n for n, a in enumerate(steps) if a <= 0]
-        if bad:
-            raise ValueError(
-                f"seed view angles must increase: alpha[{bad[0]}]={steps[bad[0]]} must be positive "
-                f"(the angle from seed {bad[0]} to seed {bad[0] + 1}), got alpha={list(alpha)}"
-            )
-    else:
-        steps = [check_alpha(alpha)] * (n_seeds - 1)  # type: ignore[arg-type]
-    if abs(sum(steps)) >= 180:
-        raise ValueError(f"alpha={alpha} with {n_seeds} seed views spans 180 degrees or more")
-    return steps
 
 
 def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
@@ -256,7 +223,7 @@ def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[
     if min(seeds.shape[1:]) < 1:
         raise ValueError(f"seeds must have C, H, W >= 1, got shape {tuple(seeds.shape)}")
     check_finite(seeds, "seeds")
-    return seeds, _steps(alpha, seeds.shape[0])
+    return seeds, pair_angles(alpha, seeds.shape[0])
 
 
 def pair_geometry(
@@ -363,7 +330,7 @@ def synthesize_views(
     """
     opts = options or SynthesisOptions()
     seeds, steps = check_seeds(seeds, alpha)
-    starts = _seed_angles(steps)
+    starts = seed_angles(steps)
     theta = as_angle_tensor(thetas, "thetas")
     n_pairs = seeds.shape[0] - 1
     masks = None if masks is None else seed_foreground(seeds, masks, opts.background, require_object=True)

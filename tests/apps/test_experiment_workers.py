@@ -61,7 +61,10 @@ def test_worker_policy() -> None:
     big = object_workers(7200, 128 * 128, 20)  # the full circle, M = 8: 118 M pixels
     assert big == (available_cpus() if available_cpus() >= 2 else 0)
     assert object_workers(int(PARALLEL_PIXELS), 1, 1) == 0  # one object: nothing to share
-    assert object_workers(int(PARALLEL_PIXELS), 1, 2) in (0, min(2, available_cpus()))
+    assert object_workers(int(PARALLEL_PIXELS), 1, 2) == (
+        min(2, available_cpus()) if available_cpus() >= 2 else 0
+    )
+    assert object_workers(int(PARALLEL_PIXELS) - 1, 1, 2) == 0  # just below the threshold
 
 
 @pytest.mark.parametrize("value", ["-1", "x", "1.5", ""])

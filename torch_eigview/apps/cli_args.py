@@ -134,26 +134,27 @@ def add_quiet(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def threads_arg(text: str) -> int:
-    """``--threads N``: an int >= 1 (argparse type)."""
+def _int_at_least(text: str, minimum: int) -> int | None:
+    """``text`` as an int >= ``minimum``, or None."""
     try:
         value = int(text)
     except ValueError:
-        value = 0
-    if value < 1:
+        return None
+    return value if value >= minimum else None
+
+
+def threads_arg(text: str) -> int:
+    """``--threads N``: an int >= 1 (argparse type)."""
+    value = _int_at_least(text, 1)
+    if value is None:
         raise argparse.ArgumentTypeError(f"--threads must be an integer >= 1, got {text!r}")
     return value
 
 
 def workers_arg(text: str) -> int | str:
     """``--workers N|auto``: an int >= 0, or ``auto`` (argparse type)."""
-    if text == "auto":
-        return text
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
+    value = "auto" if text == "auto" else _int_at_least(text, 0)
+    if value is None:
         raise argparse.ArgumentTypeError(f"--workers must be 'auto' or an integer >= 0, got {text!r}")
     return value
 

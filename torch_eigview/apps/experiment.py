@@ -40,7 +40,7 @@ from torch_eigview.apps.circle import (
     check_overlap,
     circle_layout,
 )
-from torch_eigview.apps.object_synthesis import CaughtWarning, own_views, synthesize_object
+from torch_eigview.apps.object_synthesis import CaughtWarning, own_outcome, synthesize_object
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
 from torch_eigview.check import (
     VIEW_LIMIT,
@@ -262,11 +262,9 @@ class CoilExperiment:
 
     def _real_gallery(
         self, folder: CoilFolder, obj: int, layout: CircleLayout | None
-    ) -> tuple[torch.Tensor, int, list[float]] | None:
-        """``(views, obj, poses)`` of a gallery of real views (``sparse``, ``dense``), None for ``nvs``."""
+    ) -> tuple[torch.Tensor, int, list[float]]:
+        """``(views, obj, poses)`` of a gallery of real views (``sparse``, ``dense``)."""
         c = self._center
-        if self.method == "nvs":
-            return None
         if layout is not None:
             return folder.images(obj, layout.real), obj, layout.real
         angles = [c + n * self.alpha for n in range(self.views)]
@@ -317,14 +315,11 @@ class CoilExperiment:
         """Each object's gallery in turn (``ticks``: ``objects``, or a progress bar over
         them); the ``nvs`` ones over ``workers`` processes, in order."""
         if self.method != "nvs":
-            for obj in ticks:
-                real = self._real_gallery(folder, obj, layout)
-                assert real is not None
-                yield real
+            yield from (self._real_gallery(folder, obj, layout) for obj in ticks)
             return
         workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
         jobs = (self._synthesis_job(folder, obj, layout, copy=workers > 0) for obj in objects)
-        results = map_ordered(synthesize_object, jobs, workers, finish=own_views)
+        results = map_ordered(synthesize_object, jobs, workers, finish=own_outcome)
         for obj, outcome in zip(ticks, results, strict=True):
             yield self._synthesized_gallery(obj, outcome, seconds, elevations)
 

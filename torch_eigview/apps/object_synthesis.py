@@ -8,12 +8,12 @@ both for the experiment to re-issue with the object named.
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 
 import torch
 
 from torch_eigview.apps.circle import synthesize_circle
+from torch_eigview.scale.parallel import own_views
 from torch_eigview.synthesis import (
     ElevationFallbackWarning,
     SynthesisOptions,
@@ -21,7 +21,7 @@ from torch_eigview.synthesis import (
     synthesize_views,
 )
 
-__all__ = ["CaughtWarning", "own_views", "synthesize_object"]
+__all__ = ["CaughtWarning", "own_outcome", "synthesize_object"]
 
 
 #: A warning caught in :func:`synthesize_object`: message, category, file and line.
@@ -57,11 +57,11 @@ def synthesize_object(
     return out, [(str(w.message), w.category, w.filename, w.lineno) for w in caught]
 
 
-def own_views(
+def own_outcome(
     outcome: tuple[SynthesizedViews, list[CaughtWarning]] | ValueError,
 ) -> tuple[SynthesizedViews, list[CaughtWarning]] | ValueError:
-    """A worker's views copied out of the shared memory they came in."""
+    """A worker's outcome with its views copied out of the shared memory they came in."""
     if isinstance(outcome, ValueError):
         return outcome
     out, caught = outcome
-    return dataclasses.replace(out, views=out.views.clone()), caught
+    return own_views(out), caught

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import torch
 
-from torch_eigview.check import VIEW_LIMIT, check_limit
+from torch_eigview.check import VIEW_LIMIT, check_alpha, check_limit
 
-__all__ = ["angle_range", "wrap_angle", "wrap_degrees"]
+__all__ = ["angle_range", "pair_angles", "seed_angles", "wrap_angle", "wrap_degrees"]
 
 
 def wrap_angle(angle: float) -> float:
@@ -53,3 +54,36 @@ def angle_range(start: float, stop: float, step: float, name: str) -> list[float
     check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
     n = int((stop - start) / step + 1e-9) + 1
     return [start + i * step for i in range(n)]
+
+
+def pair_angles(alpha: object, n_seeds: int) -> list[float]:
+    """Per-pair angles α_n (degrees) of ``n_seeds`` seed views: a number (every pair) or a
+    sequence of ``n_seeds − 1`` positive angles (Sec. 4.1's α_n, seed angles increasing)."""
+    if isinstance(alpha, torch.Tensor):
+        alpha = alpha.detach().reshape(-1).tolist() if alpha.ndim else float(alpha)
+    if isinstance(alpha, Sequence) and not isinstance(alpha, str):
+        if len(alpha) != n_seeds - 1:
+            raise ValueError(
+                f"alpha must hold one angle per consecutive seed pair ({n_seeds} views: {n_seeds - 1} angles), "
+                f"got {len(alpha)}"
+            )
+        steps = [check_alpha(a, f"alpha[{n}]") for n, a in enumerate(alpha)]
+        bad = [n for n, a in enumerate(steps) if a <= 0]
+        if bad:
+            raise ValueError(
+                f"seed view angles must increase: alpha[{bad[0]}]={steps[bad[0]]} must be positive "
+                f"(the angle from seed {bad[0]} to seed {bad[0] + 1}), got alpha={list(alpha)}"
+            )
+    else:
+        steps = [check_alpha(alpha)] * (n_seeds - 1)  # type: ignore[arg-type]
+    if abs(sum(steps)) >= 180:
+        raise ValueError(f"alpha={alpha} with {n_seeds} seed views spans 180 degrees or more")
+    return steps
+
+
+def seed_angles(steps: list[float]) -> list[float]:
+    """Angles of the seed views (degrees) from their per-pair angles α_n: 0, α_1, α_1 + α_2, …."""
+    out = [0.0]
+    for a in steps:
+        out.append(out[-1] + a)
+    return out

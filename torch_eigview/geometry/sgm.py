@@ -43,19 +43,16 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
     prev = padded[:, 1:-1]
     low = torch.empty_like(prev[:, :1])
     step = torch.empty_like(prev)
-    first = True
-    for t in order:
-        if first:
-            prev.copy_(c[:, :, t])
-            first = False
-        else:
-            torch.amin(prev, dim=1, keepdim=True, out=low)
-            torch.minimum(padded[:, 2:], padded[:, :-2], out=step)
-            step.add_(p1)
-            torch.minimum(step, prev, out=step)
-            torch.minimum(step, low + p2, out=step)
-            torch.add(c[:, :, t], step, out=prev)
-            prev.sub_(low)
+    prev.copy_(c[:, :, order[0]])
+    acc[:, :, order[0]] += prev
+    for t in order[1:]:
+        torch.amin(prev, dim=1, keepdim=True, out=low)
+        torch.minimum(padded[:, 2:], padded[:, :-2], out=step)
+        step.add_(p1)
+        torch.minimum(step, prev, out=step)
+        torch.minimum(step, low + p2, out=step)
+        torch.add(c[:, :, t], step, out=prev)
+        prev.sub_(low)
         acc[:, :, t] += prev
 
 

@@ -30,7 +30,14 @@ from torch_eigview.check import as_angle_tensor, check_int
 from torch_eigview.scale.thread_policy import allowed_cpus
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_seeds, synthesize_views
 
-__all__ = ["PARALLEL_PIXELS", "available_cpus", "map_ordered", "object_workers", "synthesize_objects"]
+__all__ = [
+    "PARALLEL_PIXELS",
+    "available_cpus",
+    "map_ordered",
+    "object_workers",
+    "own_views",
+    "synthesize_objects",
+]
 
 R = TypeVar("R")
 
@@ -127,10 +134,11 @@ def synthesize_objects(
         )
         for seeds in itertools.chain([first], it)
     )
-    yield from map_ordered(synthesize_views, jobs, workers, finish=_own_views)
+    yield from map_ordered(synthesize_views, jobs, workers, finish=own_views)
 
 
-def _own_views(out: SynthesizedViews) -> SynthesizedViews:
+def own_views(out: SynthesizedViews) -> SynthesizedViews:
+    """``out`` with its views copied out of the shared memory a worker sent them in."""
     # Out of the shared-memory segment it came in (a /dev/shm file per object otherwise,
     # for as long as the caller keeps the views).
     return dataclasses.replace(out, views=out.views.clone())
