@@ -240,7 +240,10 @@ def test_options_defaults() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        (dict(flow="farneback"), "flow must be 'tvl1', 'ilk' or 'rows', got 'farneback'"),
+        (
+            dict(flow="farneback"),
+            r"flow must be one of \('tvl1', 'tvl1-skimage', 'ilk', 'rows'\), got 'farneback'",
+        ),
         (dict(elevation="up"), "elevation must be a number of degrees or 'auto', got 'up'"),
         (dict(threshold=0.0), "threshold=0.0 must be positive"),
         (dict(threshold=-1.0), "threshold=-1.0 must be positive"),

@@ -40,6 +40,7 @@ from torch_eigview.check import (
 )
 from torch_eigview.geometry.angles import pair_angles, seed_angles
 from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.geometry.flow import METHODS as FLOW_METHODS
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
 from torch_eigview.warp.base import BLENDS
@@ -72,7 +73,8 @@ class SynthesisOptions:
     """How seed views become novel views.
 
     Attributes:
-        flow: the correspondences: scikit-image flow, ``"tvl1"`` or ``"ilk"``, or
+        flow: the correspondences: TV-L1 optical flow, ``"tvl1"`` (in torch, batched) or
+            ``"tvl1-skimage"`` (scikit-image's, the reference), scikit-image's ``"ilk"``, or
             ``"rows"``, semi-global matching along the epipolar lines
             (:func:`~torch_eigview.geometry.row_matcher.match_rows`, given each pair's
             α and ``center``).
@@ -116,11 +118,11 @@ class SynthesisOptions:
         """Keyword arguments for the scikit-image flow: ``flow_options``, else a fast preset."""
         if self.flow_options is not None:
             return dict(self.flow_options)
-        return dict(_FAST_TVL1) if self.flow == "tvl1" else {}
+        return dict(_FAST_TVL1) if self.flow in ("tvl1", "tvl1-skimage") else {}
 
     def __post_init__(self) -> None:
-        if self.flow not in ("tvl1", "ilk", "rows"):
-            raise ValueError(f"flow must be 'tvl1', 'ilk' or 'rows', got {self.flow!r}")
+        if self.flow not in FLOW_METHODS:
+            raise ValueError(f"flow must be one of {FLOW_METHODS}, got {self.flow!r}")
         if isinstance(self.elevation, str):
             if self.elevation != "auto":
                 raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
@@ -249,18 +251,38 @@ def pair_geometry(
     opts = options or SynthesisOptions()
     seeds, steps = check_seeds(seeds, alpha)
     fg = seed_foreground(seeds, masks, opts.background)
-    out = []
-    for n in range(seeds.shape[0] - 1):
+    n_pairs = seeds.shape[0] - 1
+    if opts.flow == "tvl1":  # batched: every pair (both directions) in one call
         t0 = time.perf_counter()
-        v1, v2 = seeds[n : n + 1], seeds[n + 1 : n + 2]
-        kwargs = opts.flow_kwargs()
-        if opts.flow == "rows":
-            kwargs = {"alpha": steps[n], "center": opts.center, **kwargs}
-        corr = estimate_correspondence(v1, v2, method=opts.flow, threshold=opts.threshold, **kwargs)
+        batch = estimate_correspondence(
+            seeds[:-1], seeds[1:], method="tvl1", threshold=opts.threshold, **opts.flow_kwargs()
+        )
+        corrs = list(batch)
+        seconds = [(time.perf_counter() - t0) / n_pairs] * n_pairs
+    else:
+        corrs, seconds = [], []
+        for n in range(n_pairs):
+            t0 = time.perf_counter()
+            kwargs = opts.flow_kwargs()
+            if opts.flow == "rows":
+                kwargs = {"alpha": steps[n], "center": opts.center, **kwargs}
+            corrs.append(
+                estimate_correspondence(
+                    seeds[n : n + 1],
+                    seeds[n + 1 : n + 2],
+                    method=opts.flow,
+                    threshold=opts.threshold,
+                    **kwargs,
+                )
+            )
+            seconds.append(time.perf_counter() - t0)
+    out = []
+    for n, corr in enumerate(corrs):
+        t0 = time.perf_counter()
         elevation = opts.elevation
         if elevation == "auto":
             elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
-        out.append(PairGeometry(corr, float(elevation), time.perf_counter() - t0))
+        out.append(PairGeometry(corr, float(elevation), seconds[n] + time.perf_counter() - t0))
     return out
 
 

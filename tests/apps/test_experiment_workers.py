@@ -1,5 +1,5 @@
-"""The COIL experiment over worker processes: the same gallery and results as in one
-process, its warnings and errors named by object, and the commands' worker policy."""
+"""The COIL experiment over worker processes and threads: the same gallery and results as in
+one process, its warnings and errors named by object, and the commands' worker policy."""
 
 from __future__ import annotations
 
@@ -17,12 +17,13 @@ from torch_eigview.scale.parallel import PARALLEL_PIXELS, available_cpus, object
 from torch_eigview.synthesis import ElevationFallbackWarning
 
 
-def test_workers_give_the_same_run(folder: CoilFolder) -> None:
-    """Two spawned workers: the same gallery, eigenspace and scores as in this process,
-    the full circle included (its sectors wrap round)."""
+@pytest.mark.parametrize("kind", ["process", "thread"])
+def test_workers_give_the_same_run(folder: CoilFolder, kind: str) -> None:
+    """Two spawned workers or two threads: the same gallery, eigenspace and scores as in
+    this process, the full circle included (its sectors wrap round)."""
     for kw in ({"alpha": 10.0}, {"seeds": 4, "synth": (0.0, 0.0, 5.0)}):
         here = CoilExperiment(objects=[1, 4, 7], **kw).run(folder)  # type: ignore[arg-type]
-        there = CoilExperiment(objects=[1, 4, 7], workers=2, **kw).run(folder)  # type: ignore[arg-type]
+        there = CoilExperiment(objects=[1, 4, 7], workers=2, worker_kind=kind, **kw).run(folder)  # type: ignore[arg-type]
         assert there.accuracy == here.accuracy and there.per_object == here.per_object
         assert there.elevations == here.elevations and there.n_train_views == here.n_train_views
         a, b = here.recognizer.state_dict(), there.recognizer.state_dict()
@@ -32,31 +33,49 @@ def test_workers_give_the_same_run(folder: CoilFolder) -> None:
             assert same, key
 
 
-def test_warnings_and_errors_name_the_object(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:
-    """A seed pair's elevation fallback is re-issued with its object, and a synthesis that
-    refuses an object's seeds is an error naming it (the path a worker's results take)."""
+@pytest.mark.parametrize("workers", [0, 2])
+def test_warnings_and_errors_name_the_object(
+    folder: CoilFolder, monkeypatch: pytest.MonkeyPatch, workers: int
+) -> None:
+    """A seed pair's elevation fallback is re-issued with its object, each object's own
+    (threads too: one thread's warnings never land with another's object), and a synthesis
+    that refuses an object's seeds is an error naming it (the path a worker's results take)."""
     original = object_synthesis.synthesize_views
 
-    def warns(*args: object, **kwargs: object) -> object:
+    def warns(seeds: torch.Tensor, *args: object, **kwargs: object) -> object:
         warnings.warn(
-            "seed pair 0: elevation='auto' could not be measured", ElevationFallbackWarning, stacklevel=1
+            f"seed pair 0: elevation='auto' could not be measured (seed sum {float(seeds.sum()):.6g})",
+            ElevationFallbackWarning,
+            stacklevel=1,
         )
-        return original(*args, **kwargs)  # type: ignore[arg-type]
+        return original(seeds, *args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(object_synthesis, "synthesize_views", warns)
-    with pytest.warns(ElevationFallbackWarning, match="object 4: seed pair 0"):
-        CoilExperiment(alpha=10.0, objects=[4]).run(folder)
+    objects = [4, 9, 12]
+    with pytest.warns(ElevationFallbackWarning) as record:
+        CoilExperiment(alpha=10.0, objects=objects, workers=workers, worker_kind="thread").run(folder)
+    messages = [str(w.message) for w in record if issubclass(w.category, ElevationFallbackWarning)]
+    expected = [
+        f"object {o}: seed pair 0: elevation='auto' could not be measured "
+        f"(seed sum {float(folder.images(o, [0.0, 10.0]).sum()):.6g})"
+        for o in objects
+    ]
+    assert messages == expected
 
     def refuses(*args: object, **kwargs: object) -> object:
         raise ValueError("the flow cannot match these views")
 
     monkeypatch.setattr(object_synthesis, "synthesize_views", refuses)
     with pytest.raises(ValueError, match="object 7: synthesis failed: the flow cannot match"):
-        CoilExperiment(alpha=10.0, objects=[7]).run(folder)
+        CoilExperiment(alpha=10.0, objects=[7, 8], workers=workers, worker_kind="thread").run(folder)
 
 
 def test_worker_policy() -> None:
-    """Workers only for a synthesis worth their start-up, at most one per object and CPU."""
+    """Processes only for a synthesis worth their start-up, threads whenever there are two
+    objects; at most one per object and CPU."""
+    cpus = available_cpus()
+    assert object_workers(820, 128 * 128, 20, kind="thread") == (min(cpus, 20) if cpus >= 2 else 0)
+    assert object_workers(820, 128 * 128, 1, kind="thread") == 0
     assert object_workers(820, 128 * 128, 20) == 0  # COIL-20 at one center: 13 M pixels
     big = object_workers(7200, 128 * 128, 20)  # the full circle, M = 8: 118 M pixels
     assert big == (available_cpus() if available_cpus() >= 2 else 0)

@@ -256,7 +256,9 @@ def test_estimate_errors() -> None:
         estimate_correspondence(bad, view)
     with pytest.raises(ValueError, match=r"view2 must be finite"):
         estimate_correspondence(view, bad)
-    with pytest.raises(ValueError, match=r"method must be one of \('tvl1', 'ilk', 'rows'\), got 'farneback'"):
+    with pytest.raises(
+        ValueError, match=r"method must be one of \('tvl1', 'tvl1-skimage', 'ilk', 'rows'\), got 'farneback'"
+    ):
         estimate_correspondence(view, view, method="farneback")
     with pytest.raises(TypeError, match=r"view1 must have a floating dtype, got torch.uint8"):
         estimate_correspondence((view * 255).to(torch.uint8), view)

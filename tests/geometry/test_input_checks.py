@@ -60,7 +60,14 @@ def test_threshold(threshold: float) -> None:
 
 def test_flow_on_huge_values_names_the_views() -> None:
     v1, v2 = rand(1, 8, 16, seed=1) * 1e30, rand(1, 8, 16, seed=2) * 1e30
-    with pytest.raises(ValueError, match=r"flow between view1 and view2 diverged.*largest magnitude 1e\+30"):
+    with pytest.raises(
+        ValueError, match=r"tvl1-skimage flow between view1 and view2 diverged.*largest magnitude 1e\+30"
+    ):
+        estimate_correspondence(v1, v2, method="tvl1-skimage")
+    # The torch TV-L1 would not diverge: its data term would vanish, and the flow be 0.
+    with pytest.raises(
+        ValueError, match=r"tvl1 flow between view1 and view2 cannot take values of magnitude 1e\+30"
+    ):
         estimate_correspondence(v1, v2)
 
 

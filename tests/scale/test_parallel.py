@@ -1,12 +1,16 @@
-"""Tests for ``synthesize_objects``: in-process ``synthesize_views`` as the reference."""
+"""Tests for ``synthesize_objects`` (in-process ``synthesize_views`` as the reference) and ``map_ordered``'s threads."""
 
 from __future__ import annotations
+
+import time
+import warnings
 
 import pytest
 import torch
 
 from torch_eigview.apps.bench_scaling import smooth_views
-from torch_eigview.scale.parallel import synthesize_objects
+from torch_eigview.scale.job_warnings import job_warnings
+from torch_eigview.scale.parallel import map_ordered, synthesize_objects
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
 
 THETAS = [-6.0, -2.0, 0.0, 2.5, 5.0, 9.0]
@@ -95,3 +99,32 @@ def test_shared_memory_stays_with_the_pool() -> None:
     out = list(synthesize_objects(objects, 5.0, THETAS, workers=1))
     assert not big.is_shared()
     assert not any(o.views.is_shared() for o in out)
+
+
+def _job(i: int) -> tuple[int, int, list[str]]:
+    """Warns with its own number (after a pause, so that the threads' jobs overlap)."""
+    with job_warnings(UserWarning) as caught:
+        time.sleep(0.01 * (i % 3))
+        warnings.warn(f"job {i}", UserWarning, stacklevel=1)
+        if i == 5:
+            raise ValueError("job 5 refuses")
+    return i, torch.get_num_threads(), [str(w.message) for w in caught]
+
+
+def test_thread_pool_in_order_with_each_jobs_warnings() -> None:
+    before = torch.get_num_threads()
+    out = list(map_ordered(_job, [(i,) for i in range(5)], 3, kind="thread"))
+    assert [o[0] for o in out] == list(range(5))
+    assert all(o[1] == before for o in out)  # the caller's intra-op threads, unchanged
+    assert [o[2] for o in out] == [[f"job {i}"] for i in range(5)]
+    with warnings.catch_warnings(record=True) as outside:  # the routing is gone with the pool
+        warnings.simplefilter("always")
+        warnings.warn("after", UserWarning, stacklevel=1)
+    assert [str(w.message) for w in outside] == ["after"]
+
+
+def test_thread_pool_error_and_bad_kind() -> None:
+    with pytest.raises(ValueError, match="job 5 refuses"):
+        list(map_ordered(_job, [(i,) for i in range(8)], 2, kind="thread"))
+    with pytest.raises(ValueError, match=r"kind='fiber' must be one of \('process', 'thread'\)"):
+        list(map_ordered(_job, [(1,)], 2, kind="fiber"))

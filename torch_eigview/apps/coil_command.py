@@ -127,17 +127,24 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         "--device",
         choices=("cpu", "cuda"),
         default="cpu",
-        help="where the views, the warp, the eigenspace and recognition run (the optical flow "
-        "stays on the CPU: scikit-image)",
+        help="where the views, the flow (tvl1, rows; the scikit-image flows stay on the CPU), the warp, "
+        "the eigenspace and recognition run",
     )
     coil.add_argument(
         "--workers",
         type=workers_arg,
         default="auto",
         metavar="N",
-        help="worker processes that synthesize the objects (one torch thread each); auto "
-        "(default): one per CPU when the synthesis is large enough to repay their start-up "
-        "(the full circle), else none",
+        help="workers that synthesize the objects, one object and one torch thread each; auto "
+        "(default): one thread per CPU, or with --worker-kind process one process per CPU when the "
+        "synthesis is large enough to repay their start-up (the full circle), else none",
+    )
+    coil.add_argument(
+        "--worker-kind",
+        choices=("thread", "process"),
+        default="thread",
+        help="threads of this process (default: the torch flows and the warp release the GIL), or "
+        "spawned processes (for the scikit-image flows, which hold it)",
     )
     add_quiet(coil)
     add_threads(coil)
@@ -147,9 +154,10 @@ def add_synthesis_arguments(parser: argparse.ArgumentParser) -> None:
     """The novel-view synthesis options (``eigview coil`` and ``eigview fit``): see :func:`synthesis_options`."""
     parser.add_argument(
         "--flow",
-        choices=("tvl1", "ilk", "rows"),
+        choices=("tvl1", "tvl1-skimage", "ilk", "rows"),  # geometry.flow.METHODS, without importing torch
         default="tvl1",
-        help="correspondences: optical flow, or semi-global matching along rows (rows)",
+        help="correspondences: TV-L1 optical flow in torch (tvl1, default) or scikit-image's "
+        "(tvl1-skimage, the reference), scikit-image's ILK flow, or semi-global matching along rows (rows)",
     )
     parser.add_argument(
         "--elevation",
@@ -266,6 +274,7 @@ def run_coil(args: argparse.Namespace) -> int:
         overlap=0.0 if args.overlap is None else args.overlap,
     )
     experiment.workers = _workers(args, experiment, folder)
+    experiment.worker_kind = args.worker_kind
     if args.seeds is not None:
         experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
     if args.kernel and args.save:
@@ -304,7 +313,7 @@ def _workers(args: argparse.Namespace, experiment: CoilExperiment, folder: CoilF
     )
     some = folder.objects[0]  # the folder's images share one size
     pixels = folder.image(some, folder.poses(some)[0])[0].numel()
-    return object_workers(per_object * n_objects, pixels, n_objects)
+    return object_workers(per_object * n_objects, pixels, n_objects, kind=args.worker_kind)
 
 
 def _device(name: str) -> torch.device:

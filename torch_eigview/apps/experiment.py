@@ -45,6 +45,7 @@ from torch_eigview.apps.protocol import angle_range, build_recognizer, score, st
 from torch_eigview.check import (
     VIEW_LIMIT,
     check_alpha,
+    check_choice,
     check_int,
     check_limit,
     check_n_components,
@@ -54,7 +55,7 @@ from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import wrap_angle
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
-from torch_eigview.scale.parallel import map_ordered
+from torch_eigview.scale.parallel import KINDS, map_ordered
 from torch_eigview.synthesis import (
     ElevationFallbackWarning,
     SynthesisOptions,
@@ -143,10 +144,16 @@ class CoilExperiment:
             not the nearest view's pose.
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
             (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
-        workers: worker processes that synthesize the ``nvs`` galleries, one object each at
-            a time with one torch thread (:func:`~torch_eigview.scale.parallel.map_ordered`);
-            0 (the default) synthesizes in this process. CPU only: a folder on another
+        workers: workers that synthesize the ``nvs`` galleries, one object each at a time
+            (:func:`~torch_eigview.scale.parallel.map_ordered`; processes run one torch
+            thread each, threads torch's current setting: the commands run them under
+            ``threads(1)``, and a script should too); 0
+            (the default) synthesizes in this process. CPU only: a folder on another
             device synthesizes in this process. The views are the same either way.
+        worker_kind: ``"thread"`` (the default: threads of this process, no start-up cost;
+            the flow and the warp run in torch kernels, which release the GIL) or
+            ``"process"`` (spawned processes, for flows that hold the GIL: ``ilk``,
+            ``tvl1-skimage``).
     """
 
     alpha: float = 5.0
@@ -167,9 +174,11 @@ class CoilExperiment:
     interpolate_pose: bool = False
     overlap: float = 0.0
     workers: int = 0
+    worker_kind: str = "thread"
 
     def __post_init__(self) -> None:
         check_int(self.workers, "workers", minimum=0)
+        check_choice(self.worker_kind, "worker_kind", KINDS)
         if self.kernel is not None:
             KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)  # validates both
         elif self.gamma is not None:
@@ -313,13 +322,14 @@ class CoilExperiment:
         layout: CircleLayout | None,
     ) -> Iterator[tuple[torch.Tensor, int, list[float]]]:
         """Each object's gallery in turn (``ticks``: ``objects``, or a progress bar over
-        them); the ``nvs`` ones over ``workers`` processes, in order."""
+        them); the ``nvs`` ones over ``workers`` threads or processes, in order."""
         if self.method != "nvs":
             yield from (self._real_gallery(folder, obj, layout) for obj in ticks)
             return
         workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
-        jobs = (self._synthesis_job(folder, obj, layout, copy=workers > 0) for obj in objects)
-        results = map_ordered(synthesize_object, jobs, workers, finish=own_outcome)
+        copy = workers > 0 and self.worker_kind == "process"
+        jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
+        results = map_ordered(synthesize_object, jobs, workers, finish=own_outcome, kind=self.worker_kind)
         for obj, outcome in zip(ticks, results, strict=True):
             yield self._synthesized_gallery(obj, outcome, seconds, elevations)
 

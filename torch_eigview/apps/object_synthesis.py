@@ -8,11 +8,10 @@ both for the experiment to re-issue with the object named.
 
 from __future__ import annotations
 
-import warnings
-
 import torch
 
 from torch_eigview.apps.circle import synthesize_circle
+from torch_eigview.scale.job_warnings import job_warnings
 from torch_eigview.scale.parallel import own_views
 from torch_eigview.synthesis import (
     ElevationFallbackWarning,
@@ -36,7 +35,7 @@ def synthesize_object(
     options: SynthesisOptions,
     overlap: float,
 ) -> tuple[SynthesizedViews, list[CaughtWarning]] | ValueError:
-    """One object's ``nvs`` gallery, in this process or a worker's: the views at ``thetas``
+    """One object's ``nvs`` gallery, in this process, a pool thread or a worker process: the views at ``thetas``
     from seeds α apart, or with ``thetas`` None the full circle every ``step`` degrees
     (:func:`~torch_eigview.apps.circle.synthesize_circle`).
 
@@ -45,8 +44,7 @@ def synthesize_object(
         re-issues them), or the ``ValueError`` that refused the object's seeds, for the
         caller to name the object.
     """
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ElevationFallbackWarning)
+    with job_warnings(ElevationFallbackWarning) as caught:
         try:
             if thetas is None:
                 out = synthesize_circle(seeds, step, options, overlap=overlap)

@@ -1,4 +1,5 @@
-"""Dense correspondences between two seed views: scikit-image optical flow or the row matcher.
+"""Dense correspondences between two seed views: TV-L1 optical flow (in torch, or scikit-image's),
+scikit-image's ILK flow, or the row matcher.
 
 :func:`estimate_correspondence` estimates both directions (view 1 → 2 and 2 → 1) and
 keeps the horizontal disparity with a forward–backward validity mask
@@ -17,11 +18,12 @@ from skimage.registration import optical_flow_ilk, optical_flow_tvl1
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.row_matcher import match_rows
+from torch_eigview.geometry.tvl1 import max_magnitude, tvl1_flow
 
 __all__ = ["METHODS", "estimate_correspondence"]
 
 #: The correspondence methods of :func:`estimate_correspondence`.
-METHODS = ("tvl1", "ilk", "rows")
+METHODS = ("tvl1", "tvl1-skimage", "ilk", "rows")
 
 
 def _to_gray_numpy(view: torch.Tensor) -> np.ndarray:
@@ -36,22 +38,26 @@ def estimate_correspondence(
     threshold: float = 1.0,
     **flow_kwargs: object,
 ) -> Correspondence:
-    """Dense correspondences with scikit-image optical flow and a consistency mask.
+    """Dense correspondences from optical flow (or the row matcher) and a consistency mask.
 
     The flow is estimated in both directions (view 1 → 2 and 2 → 1) on the grayscale
-    images; only its horizontal component is kept, as the orthographic rotation about
-    the vertical axis moves points along rows.
+    images; its horizontal component is the disparity, as the orthographic rotation about
+    the vertical axis moves points along rows, and its vertical one is kept for the tilt
+    estimate.
 
     Args:
         view1: (C, H, W) or (B, C, H, W) image of the first seed view.
         view2: same shape, the second seed view.
-        method: ``"tvl1"`` (:func:`skimage.registration.optical_flow_tvl1`), ``"ilk"``
+        method: ``"tvl1"`` (:func:`~torch_eigview.geometry.tvl1.tvl1_flow`: TV-L1 in torch,
+            every pair and both directions in one batch, on the views' device),
+            ``"tvl1-skimage"`` (:func:`skimage.registration.optical_flow_tvl1`, the same
+            algorithm pair by pair on the CPU: the reference), ``"ilk"``
             (:func:`skimage.registration.optical_flow_ilk`) or ``"rows"`` (semi-global
             matching along the turntable's epipolar lines in torch,
             :func:`~torch_eigview.geometry.row_matcher.match_rows`, which needs ``alpha``
             among ``flow_kwargs``).
         threshold: forward–backward tolerance in pixels for the validity masks.
-        **flow_kwargs: passed to the scikit-image flow function.
+        **flow_kwargs: passed to the flow function (TV-L1's ``num_warp``, ``num_iter``, …).
 
     Returns:
         A :class:`Correspondence` of shape (B, H, W) on the device and dtype of ``view1``;
@@ -88,7 +94,39 @@ def estimate_correspondence(
         return _one_row(v1, v2, method, threshold, flow_kwargs)
     if method == "rows":
         return match_rows(v1, v2, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
+    if method == "tvl1":
+        return _torch_tvl1(v1, v2, threshold, flow_kwargs)
     return _skimage_flow(v1, v2, method, threshold, flow_kwargs)
+
+
+def _torch_tvl1(
+    v1: torch.Tensor, v2: torch.Tensor, threshold: float, flow_kwargs: dict[str, object]
+) -> Correspondence:
+    """TV-L1 in torch: all pairs, both directions, one batch (float32, as scikit-image's)."""
+    check_finite(v1, "view1")
+    check_finite(v2, "view2")
+    if v1.ndim == 3:
+        v1, v2 = v1[None], v2[None]
+    b = v1.shape[0]
+    largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
+    if largest > max_magnitude(torch.float32):
+        raise ValueError(
+            f"the tvl1 flow between view1 and view2 cannot take values of magnitude {largest:.3g} (float32's "
+            f"squared gradients overflow beyond {max_magnitude(torch.float32):.3g}): the views must be image "
+            f"intensities, e.g. in [0, 1]"
+        )
+    # Grayscale as the reference path makes it (float64 mean, then scikit-image's float32).
+    g1, g2 = (v.detach().double().mean(dim=1).float() for v in (v1, v2))
+    with torch.no_grad():
+        flow = tvl1_flow(torch.cat([g1, g2]), torch.cat([g2, g1]), **flow_kwargs)  # type: ignore[arg-type]
+    if not bool(torch.isfinite(flow).all()):
+        raise ValueError(
+            f"the tvl1 flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
+            f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
+        )
+    flow = flow.to(v1.dtype)
+    corr = correspondence_from_disparity(flow[:b, 1], flow[b:, 1], threshold=threshold)
+    return dataclasses.replace(corr, vertical_12=flow[:b, 0], vertical_21=flow[b:, 0])
 
 
 def _one_row(
@@ -108,7 +146,8 @@ def _one_row(
 def _skimage_flow(
     v1: torch.Tensor, v2: torch.Tensor, method: str, threshold: float, flow_kwargs: dict[str, object]
 ) -> Correspondence:
-    """scikit-image's TV-L1 or ILK flow in both directions, pair by pair, on the CPU."""
+    """scikit-image's TV-L1 (``"tvl1-skimage"``) or ILK flow in both directions, pair by pair,
+    on the CPU."""
     view1 = v1
     check_finite(v1, "view1")
     check_finite(v2, "view2")
@@ -118,7 +157,7 @@ def _skimage_flow(
         empty = v1.new_zeros(0, *v1.shape[-2:])
         mask = torch.zeros(empty.shape, dtype=torch.bool, device=v1.device)
         return Correspondence(empty, empty.clone(), mask, mask.clone(), empty.clone(), empty.clone())
-    flow = optical_flow_tvl1 if method == "tvl1" else optical_flow_ilk
+    flow = optical_flow_tvl1 if method == "tvl1-skimage" else optical_flow_ilk
     d12, d21, v12, v21 = [], [], [], []
     # A diverging flow is reported below with its cause, not as numpy's RuntimeWarnings.
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):

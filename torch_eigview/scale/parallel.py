@@ -20,17 +20,20 @@ import dataclasses
 import itertools
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from contextlib import ExitStack
 from typing import Any, TypeVar
 
 import torch
 import torch.multiprocessing as mp
 
-from torch_eigview.check import as_angle_tensor, check_int
+from torch_eigview.check import as_angle_tensor, check_choice, check_int
+from torch_eigview.scale.job_warnings import routing
 from torch_eigview.scale.thread_policy import allowed_cpus
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_seeds, synthesize_views
 
 __all__ = [
+    "KINDS",
     "PARALLEL_PIXELS",
     "available_cpus",
     "map_ordered",
@@ -40,6 +43,9 @@ __all__ = [
 ]
 
 R = TypeVar("R")
+
+#: What :func:`map_ordered` runs its jobs in.
+KINDS = ("process", "thread")
 
 
 def available_cpus() -> int:
@@ -54,17 +60,24 @@ def available_cpus() -> int:
 PARALLEL_PIXELS = 5e7
 
 
-def object_workers(n_views: int, pixels: int, n_objects: int) -> int:
-    """The commands' worker processes for synthesizing ``n_views`` views of ``pixels``
-    pixels each over ``n_objects`` objects: one per CPU this process may use (at most one
-    per object) when the work is worth the workers' start-up (:data:`PARALLEL_PIXELS`),
-    else 0 (synthesis in the calling process).
+def object_workers(n_views: int, pixels: int, n_objects: int, kind: str = "process") -> int:
+    """The commands' workers for synthesizing ``n_views`` views of ``pixels`` pixels each
+    over ``n_objects`` objects: one per CPU this process may use, at most one per object.
 
-    Each worker runs one torch thread, and the workers share nothing while they run, so a
-    busy neighbour slows them as it slows any process instead of making threads spin.
+    Threads (``kind="thread"``) cost nothing to start, so there is one per CPU whenever
+    there are two objects and two CPUs. Processes pay 3–4 s each to start, so they start
+    only when the work repays it (:data:`PARALLEL_PIXELS`), else 0 (synthesis in the
+    calling process).
+
+    Each worker runs one torch thread, and the workers do not wait for each other while
+    they run, so a busy neighbour slows them as it slows any process instead of making
+    threads spin.
     """
+    kind = check_choice(kind, "kind", KINDS)
     cpus = available_cpus()
-    if cpus < 2 or n_objects < 2 or n_views * pixels < PARALLEL_PIXELS:
+    if cpus < 2 or n_objects < 2:
+        return 0
+    if kind == "process" and n_views * pixels < PARALLEL_PIXELS:
         return 0
     return min(cpus, n_objects)
 
@@ -150,46 +163,64 @@ def map_ordered(
     workers: int,
     *,
     finish: Callable[[R], R] | None = None,
+    kind: str = "process",
 ) -> Iterator[R]:
-    """``fn(*job)`` for each job, in the order of ``jobs``, over ``workers`` processes.
+    """``fn(*job)`` for each job, in the order of ``jobs``, over ``workers`` processes or threads.
 
-    The processes are spawned, each with one torch thread; at most ``2 · workers`` jobs are
-    in flight (``jobs`` is consumed lazily), and an error of ``fn`` is raised when its job's
-    turn comes, after which the pool shuts down. ``workers=0`` calls ``fn`` in this process.
+    At most ``2 · workers`` jobs are in flight (``jobs`` is consumed lazily), and an error
+    of ``fn`` is raised when its job's turn comes, after which the pool shuts down.
+    ``workers=0`` calls ``fn`` in this process.
+
+    - ``kind="process"``: spawned processes, each with one torch thread; tensors travel
+      through shared memory. For work that holds Python's GIL (numpy-heavy code).
+    - ``kind="thread"``: threads of this process, for work that runs in torch kernels
+      (they release the GIL): no start-up cost, nothing copied. Each thread's torch
+      operations use torch's intra-op threads as the caller set them: run the pool under
+      :func:`~torch_eigview.scale.thread_policy.threads` ``(1)``, as the commands do (the
+      parallelism is over jobs; an OpenMP team per thread would oversubscribe the
+      cores). Warnings raised inside a job's
+      :func:`~torch_eigview.scale.job_warnings.job_warnings` go to that job only.
 
     Args:
-        fn: a module-level function (the workers import it by name).
-        jobs: argument tuples; tensors in them travel through shared memory.
-        workers: worker processes, 0 for none.
-        finish: applied to each result of a worker in this process (e.g. to copy its
-            tensors out of shared memory); not to results computed here.
+        fn: a module-level function for processes (the workers import it by name).
+        jobs: argument tuples.
+        workers: worker processes or threads, 0 for none.
+        finish: applied to each result of a worker process in this process (e.g. to copy
+            its tensors out of shared memory); not to results computed in this process.
+        kind: ``"process"`` or ``"thread"``.
 
     Yields:
         The results, in order.
     """
     workers = check_int(workers, "workers", minimum=0)
+    kind = check_choice(kind, "kind", KINDS)
     if workers == 0:
         for job in jobs:
             yield fn(*job)
         return
-    pool = ProcessPoolExecutor(
-        max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker
-    )
-    pending: deque[Future[R]] = deque()
+    with ExitStack() as stack:
+        if kind == "thread":
+            stack.enter_context(routing())
+            pool: Executor = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="eigview-job")
+        else:
+            pool = ProcessPoolExecutor(
+                max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker
+            )
+        pending: deque[Future[R]] = deque()
 
-    def collect() -> R:
-        out = pending.popleft().result()
-        return out if finish is None else finish(out)
+        def collect() -> R:
+            out = pending.popleft().result()
+            return out if finish is None or kind == "thread" else finish(out)
 
-    try:
-        for job in jobs:
-            pending.append(pool.submit(fn, *job))
-            if len(pending) >= 2 * workers:
+        try:
+            for job in jobs:
+                pending.append(pool.submit(fn, *job))
+                if len(pending) >= 2 * workers:
+                    yield collect()
+            while pending:
                 yield collect()
-        while pending:
-            yield collect()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _as_seeds(seeds: object) -> torch.Tensor:
