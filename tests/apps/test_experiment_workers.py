@@ -14,6 +14,7 @@ from torch_eigview.apps.cli import main
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.scale.parallel import PARALLEL_PIXELS, available_cpus, object_workers
+from torch_eigview.scale.thread_policy import threads
 from torch_eigview.synthesis import ElevationFallbackWarning
 
 
@@ -74,8 +75,11 @@ def test_worker_policy() -> None:
     """Processes only for a synthesis worth their start-up, threads whenever there are two
     objects; at most one per object and CPU."""
     cpus = available_cpus()
-    assert object_workers(820, 128 * 128, 20, kind="thread") == (min(cpus, 20) if cpus >= 2 else 0)
-    assert object_workers(820, 128 * 128, 1, kind="thread") == 0
+    with threads(1):
+        assert object_workers(820, 128 * 128, 20, kind="thread") == (min(cpus, 20) if cpus >= 2 else 0)
+        assert object_workers(820, 128 * 128, 1, kind="thread") == 0
+    with threads(2):  # intra-op threads asked for: no worker threads on top
+        assert object_workers(820, 128 * 128, 20, kind="thread") == 0
     assert object_workers(820, 128 * 128, 20) == 0  # COIL-20 at one center: 13 M pixels
     big = object_workers(7200, 128 * 128, 20)  # the full circle, M = 8: 118 M pixels
     assert big == (available_cpus() if available_cpus() >= 2 else 0)

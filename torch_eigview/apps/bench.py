@@ -320,7 +320,9 @@ def _section_coil100(results: dict[str, Any], quick: bool) -> None:
     for row in c:
         if row["kind"] != "pipeline":
             continue
-        where = f"{row['workers']} worker processes" if row["workers"] else "in one process, torch's threads"
+        kind = row.get("worker_kind", "process")
+        plural = "processes" if kind == "process" else "threads"
+        where = f"{row['workers']} worker {plural}" if row["workers"] else "in one process, torch's threads"
         target = (
             f"target for 100 objects: 60 s, {_met(row['seconds'] <= 60)}"
             if n == 100

@@ -8,6 +8,7 @@ SPEC`` so that its peak resident set (:class:`_PeakRss`) is its own.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -20,7 +21,7 @@ import torch
 import torch.nn.functional as F
 
 from torch_eigview.decomposition.streaming import CHUNK_VIEWS
-from torch_eigview.scale.thread_policy import eigen_flops, for_products
+from torch_eigview.scale.thread_policy import eigen_flops, for_products, threads
 
 __all__ = ["bench_coil100", "bench_scaling", "run_case", "smooth_views"]
 
@@ -153,16 +154,21 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
         if kind == "pipeline":
             # The whole build: per object flow + 41 synthesized views (two seeds 5 px apart),
             # stored once in a disk cache, then the exact Gram by panels from the cache.
-            # Objects go to ``workers`` processes (one thread each), results come back in order.
+            # Objects go to ``workers`` processes or threads (one torch thread each), results
+            # come back in order.
             from torch_eigview.scale.parallel import synthesize_objects
             from torch_eigview.scale.view_cache import ViewCache
 
             seeds = (smooth_views(o, 6, ch, size)[[0, 5]] for o in range(n_obj))
             with ViewCache() as cache:
-                for synth in synthesize_objects(
-                    seeds, 5.0, list(range(-20, 21)), workers=spec.get("workers", 0)
-                ):
-                    cache.append(synth.views)
+                kind = spec.get("worker_kind", "process")
+                # Thread workers run one torch thread each, as under the commands' policy.
+                with threads(1) if kind == "thread" else contextlib.nullcontext():
+                    stream = synthesize_objects(
+                        seeds, 5.0, list(range(-20, 21)), workers=spec.get("workers", 0), kind=kind
+                    )
+                    for synth in stream:
+                        cache.append(synth.views)
                 extra["synthesis_s"] = time.perf_counter() - t0
                 with for_products(flops) as n_threads:
                     space = StreamingEigenspace(k, method="exact", max_views=spec["max_views"]).fit(cache)
@@ -242,7 +248,8 @@ def bench_coil100(n_objects: int, panel: int, explicit: bool) -> list[dict[str, 
     kinds = ("explicit", "exact", "randomized") if explicit else ("exact", "randomized")
     spec = dict(objects=n_objects, size=128, channels=3, k=15, max_views=panel)
     rows = [_measure(dict(spec, kind=k)) for k in kinds]
-    # The whole build in this process (torch's threads) and over one process per CPU.
-    for workers in (0, available_cpus()):
-        rows.append(_measure(dict(spec, kind="pipeline", workers=workers)))
+    # The whole build in this process (torch's threads), over one process per CPU and over
+    # one thread per CPU (the commands' default).
+    for workers, worker_kind in ((0, "process"), (available_cpus(), "process"), (available_cpus(), "thread")):
+        rows.append(_measure(dict(spec, kind="pipeline", workers=workers, worker_kind=worker_kind)))
     return rows

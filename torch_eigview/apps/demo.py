@@ -122,9 +122,14 @@ def _gallery_blocks(
     synth: tuple[float, float, float] | None,
     correspondences: str,
 ) -> Iterator[tuple[torch.Tensor, int, list[float]]]:
-    """Per object of ``names`` (the scene's, in order), its synthesized views, index and angles."""
-    for i, name in enumerate(names):
-        views, thetas = synthetic_gallery(scene, name, alpha, n_views, synth, correspondences)
+    """Per object of ``names`` (the scene's, in order), its synthesized views, index and angles,
+    one thread per CPU and object (torch kernels release the GIL)."""
+    from torch_eigview.scale.parallel import map_ordered, object_workers
+
+    workers = object_workers(0, 0, len(scene.shapes), kind="thread")
+    jobs = ((scene, name, alpha, n_views, synth, correspondences) for name in scene.shapes)
+    results = map_ordered(synthetic_gallery, jobs, workers, kind="thread")
+    for i, (_, (views, thetas)) in enumerate(zip(names, results, strict=True)):
         yield views, i, thetas
 
 

@@ -337,11 +337,19 @@ def run_fit(args: argparse.Namespace) -> int:
     held = held_out_thetas(plan, reject_poses)
     held_views: list[torch.Tensor] = []
 
+    def gallery(obj: str) -> tuple[torch.Tensor, list[float], torch.Tensor]:
+        return _gallery(_read_seeds(picked[obj], size, channels, background), plan, options, obj, held)
+
     def blocks() -> Iterator[tuple[torch.Tensor, int, list[float]]]:
+        from torch_eigview.scale.parallel import map_ordered, object_workers
+
         loop = progress_bar(args.quiet, "fit objects", "obj")
-        for label, obj in enumerate(loop(objects) if loop else objects):
-            seeds = _read_seeds(picked[obj], size, channels, background)
-            views, poses, held_out = _gallery(seeds, plan, options, obj, held)
+        # One thread per CPU, one object each (torch kernels release the GIL); in order.
+        workers = object_workers(0, 0, len(objects), kind="thread")
+        results = map_ordered(gallery, ((obj,) for obj in objects), workers, kind="thread")
+        for label, (_, (views, poses, held_out)) in enumerate(
+            zip(loop(objects) if loop else objects, results, strict=True)
+        ):
             held_views.append(held_out)
             yield views, label, poses
 

@@ -65,7 +65,9 @@ def object_workers(n_views: int, pixels: int, n_objects: int, kind: str = "proce
     over ``n_objects`` objects: one per CPU this process may use, at most one per object.
 
     Threads (``kind="thread"``) cost nothing to start, so there is one per CPU whenever
-    there are two objects and two CPUs. Processes pay 3–4 s each to start, so they start
+    there are two objects and two CPUs, and torch runs one intra-op thread (the commands'
+    policy; with more, as under ``--threads 2``, each worker thread's OpenMP team would
+    oversubscribe the cores, so there are none). Processes pay 3–4 s each to start, so they start
     only when the work repays it (:data:`PARALLEL_PIXELS`), else 0 (synthesis in the
     calling process).
 
@@ -78,6 +80,8 @@ def object_workers(n_views: int, pixels: int, n_objects: int, kind: str = "proce
     if cpus < 2 or n_objects < 2:
         return 0
     if kind == "process" and n_views * pixels < PARALLEL_PIXELS:
+        return 0
+    if kind == "thread" and torch.get_num_threads() > 1:
         return 0
     return min(cpus, n_objects)
 
@@ -95,8 +99,9 @@ def synthesize_objects(
     options: SynthesisOptions | None = None,
     *,
     workers: int = 0,
+    kind: str = "process",
 ) -> Iterator[SynthesizedViews]:
-    """:func:`~torch_eigview.synthesis.synthesize_views` for each object, over ``workers`` processes.
+    """:func:`~torch_eigview.synthesis.synthesize_views` for each object, over ``workers`` processes or threads.
 
     Args:
         objects: iterable of (V, C, H, W) seed views, one entry per object (consumed
@@ -105,8 +110,11 @@ def synthesize_objects(
             the same for every object.
         thetas: (T,) novel angles in degrees from the first seed view.
         options: :class:`~torch_eigview.synthesis.SynthesisOptions`.
-        workers: worker processes; 0 synthesizes in this process (no pool, no start-up
-            cost). :func:`available_cpus` is the natural choice for a large build.
+        workers: worker processes or threads; 0 synthesizes in this process (no pool, no
+            start-up cost). :func:`available_cpus` is the natural choice for a large build.
+        kind: ``"process"`` (spawned, one torch thread each) or ``"thread"`` (threads of
+            this process: no start-up cost; run them under ``threads(1)``), see
+            :func:`map_ordered`.
 
     Yields:
         One :class:`~torch_eigview.synthesis.SynthesizedViews` per object, in the order
@@ -127,6 +135,7 @@ def synthesize_objects(
         [3, 3, 3]
     """
     workers = check_int(workers, "workers", minimum=0)  # 0: synthesize in this process
+    kind = check_choice(kind, "kind", KINDS)
     if options is not None and not isinstance(options, SynthesisOptions):
         raise TypeError(f"options must be a SynthesisOptions or None, got {type(options).__name__}")
     angles = as_angle_tensor(thetas, "thetas").tolist()  # checked here, not in a worker
@@ -138,16 +147,17 @@ def synthesize_objects(
         check_seeds(_as_seeds(first), alpha)
     # A copy: sending a tensor moves its whole storage into shared memory, and the caller's
     # tensor (or the larger tensor it is a view of) with it.
+    copy = workers and kind == "process"
     jobs = (
         (
-            _as_seeds(seeds) if not workers else _as_seeds(seeds).detach().to("cpu", copy=True),
+            _as_seeds(seeds) if not copy else _as_seeds(seeds).detach().to("cpu", copy=True),
             alpha,
             angles,
             options,
         )
         for seeds in itertools.chain([first], it)
     )
-    yield from map_ordered(synthesize_views, jobs, workers, finish=own_views)
+    yield from map_ordered(synthesize_views, jobs, workers, finish=own_views, kind=kind)
 
 
 def own_views(out: SynthesizedViews) -> SynthesizedViews:
