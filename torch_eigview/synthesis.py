@@ -53,6 +53,7 @@ __all__ = [
     "PairGeometry",
     "SynthesisOptions",
     "SynthesizedViews",
+    "object_geometries",
     "pair_geometry",
     "pair_of",
     "synthesize_views",
@@ -283,6 +284,54 @@ def pair_geometry(
         if elevation == "auto":
             elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
         out.append(PairGeometry(corr, float(elevation), seconds[n] + time.perf_counter() - t0))
+    return out
+
+
+def object_geometries(
+    objects: Sequence[torch.Tensor], alpha: float | Sequence[float], options: SynthesisOptions | None = None
+) -> list[list[PairGeometry]]:
+    """:func:`pair_geometry` of many objects; with ``flow="tvl1"`` every seed pair of every
+    object (both directions) is one batched flow call, on the seeds' device.
+
+    Args:
+        objects: per object its (V, C, H, W) seed views, the same shape for all.
+        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
+        options: :class:`SynthesisOptions`.
+
+    Returns:
+        Per object its V − 1 :class:`PairGeometry` records (each pair's seconds a share of
+        the batch's), for :func:`synthesize_views`'s ``geometry``.
+    """
+    opts = options or SynthesisOptions()
+    checked = [check_seeds(s, alpha)[0] for s in objects]
+    if opts.flow != "tvl1" or len(checked) < 2:
+        return [pair_geometry(s, alpha, opts) for s in checked]
+    if len({tuple(s.shape) for s in checked}) > 1:
+        raise ValueError(
+            f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
+        )
+    steps = pair_angles(alpha, checked[0].shape[0])
+    t0 = time.perf_counter()
+    batch = estimate_correspondence(
+        torch.cat([s[:-1] for s in checked]),
+        torch.cat([s[1:] for s in checked]),
+        method="tvl1",
+        threshold=opts.threshold,
+        **opts.flow_kwargs(),
+    )
+    corrs = list(batch)
+    n_pairs = len(steps)
+    share = (time.perf_counter() - t0) / len(corrs)
+    out = []
+    for o, s in enumerate(checked):
+        fg = seed_foreground(s, None, opts.background)
+        geos = []
+        for n in range(n_pairs):
+            elevation = opts.elevation
+            if elevation == "auto":
+                elevation = _auto_elevation(corrs[o * n_pairs + n], steps[n], fg[n : n + 1], opts.center, n)
+            geos.append(PairGeometry(corrs[o * n_pairs + n], float(elevation), share))
+        out.append(geos)
     return out
 
 
