@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-import torch_eigview.synthesis as synthesis
+import torch_eigview.seed_pairs as seed_pairs
 from torch_eigview.synthesis import (
     MAX_AUTO_ELEVATION,
     ElevationFallbackWarning,
@@ -33,7 +33,7 @@ def test_no_trusted_foreground_falls_back_to_zero() -> None:
 
 @pytest.mark.parametrize("estimate", [90.0, -90.0, MAX_AUTO_ELEVATION, math.nan])
 def test_saturated_fit_falls_back_to_zero(monkeypatch: pytest.MonkeyPatch, estimate: float) -> None:
-    monkeypatch.setattr(synthesis, "estimate_elevation", lambda *a, **k: torch.tensor([estimate]))
+    monkeypatch.setattr(seed_pairs, "estimate_elevation", lambda *a, **k: torch.tensor([estimate]))
     seeds = rand(2, 1, 8, 10, dtype=torch.float32)
     with pytest.warns(ElevationFallbackWarning, match=r"the fit gave elevation="):
         out = synthesize_views(seeds, 10.0, [0.0, 5.0], OPTS)
@@ -41,7 +41,7 @@ def test_saturated_fit_falls_back_to_zero(monkeypatch: pytest.MonkeyPatch, estim
 
 
 def test_plausible_fit_kept(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(synthesis, "estimate_elevation", lambda *a, **k: torch.tensor([12.5]))
+    monkeypatch.setattr(seed_pairs, "estimate_elevation", lambda *a, **k: torch.tensor([12.5]))
     (geo,) = pair_geometry(rand(2, 1, 8, 10, dtype=torch.float32), 10.0, OPTS)
     assert geo.elevation == 12.5
 

@@ -21,127 +21,40 @@ Each pair keeps its own elevation estimate (``elevation="auto"``), from its own 
 
 from __future__ import annotations
 
-import math
 import time
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.check import (
-    as_angle_tensor,
-    check_finite,
-    check_float_tensor,
-    check_int,
-    check_ndim,
-    check_number,
-    check_positive,
-)
+from torch_eigview.check import as_angle_tensor, check_int
 from torch_eigview.geometry.angles import pair_angles, seed_angles
-from torch_eigview.geometry.correspondence import Correspondence
-from torch_eigview.geometry.flow import METHODS as FLOW_METHODS
-from torch_eigview.geometry.flow import estimate_correspondence
-from torch_eigview.geometry.pose import estimate_elevation
-from torch_eigview.warp.base import BLENDS
+from torch_eigview.seed_pairs import (
+    MAX_AUTO_ELEVATION,
+    ElevationFallbackWarning,
+    PairGeometry,
+    check_seeds,
+    object_geometries,
+    pair_geometry,
+)
+from torch_eigview.synthesis_options import SynthesisOptions
 from torch_eigview.warp.normalize import normalize_extent, resolve_extent, seed_foreground
 from torch_eigview.warp.novel_view import NovelViewWarp
 
+# The seed pairs' geometry and the options live in their own modules; the names stay
+# importable from here, where the pipeline has always offered them.
 __all__ = [
     "MAX_AUTO_ELEVATION",
     "ElevationFallbackWarning",
     "PairGeometry",
     "SynthesisOptions",
     "SynthesizedViews",
+    "check_seeds",
     "object_geometries",
     "pair_geometry",
     "pair_of",
     "synthesize_views",
 ]
-
-_FAST_TVL1 = {"num_warp": 3, "num_iter": 5}
-#: The largest absolute elevation (degrees) an "auto" estimate may have: what NovelViewWarp
-#: accepts, strictly below 90.
-MAX_AUTO_ELEVATION = 89.0
-
-
-class ElevationFallbackWarning(UserWarning):
-    """``elevation="auto"`` could not measure a seed pair's elevation and used 0."""
-
-
-@dataclass(frozen=True)
-class SynthesisOptions:
-    """How seed views become novel views.
-
-    Attributes:
-        flow: the correspondences: TV-L1 optical flow, ``"tvl1"`` (in torch, batched) or
-            ``"tvl1-skimage"`` (scikit-image's, the reference), scikit-image's ``"ilk"``, or
-            ``"rows"``, semi-global matching along the epipolar lines
-            (:func:`~torch_eigview.geometry.row_matcher.match_rows`, given each pair's
-            α and ``center``).
-        threshold: forward–backward consistency tolerance in pixels.
-        elevation: camera elevation in degrees (0: the paper's orthographic camera, rows
-            stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow; a
-            pair whose flow gives no trusted foreground match, or a fit at
-            ``MAX_AUTO_ELEVATION`` or beyond (saturated), falls back to 0 with an
-            :class:`ElevationFallbackWarning`.
-        extent: size-normalize each synthesized view as the data set's images are (COIL's
-            processed set is): True, False or ``"auto"``
-            (:func:`~torch_eigview.warp.normalize.resolve_extent`).
-        background: intensity below which a pixel is background (``extent``, elevation fit).
-        center: column of the rotation axis, default the image's centre column.
-        max_stretch: see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`.
-        flow_options: keyword arguments for the scikit-image flow function. By default
-            TV-L1 runs 3 warps of 5 iterations (scikit-image's defaults are 5 and 10):
-            3x faster, and on COIL-20 as accurate (see the README).
-        blend: how the two seeds of a pair share the pixels both see, ``"linear"`` or
-            ``"nearest"`` (see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`).
-        silhouette: silhouette-aware sampling: only the seeds' foreground pixels
-            (``background``) enter a synthesized pixel, renormalized, and a pixel less
-            than half covered by them is background (``NovelViewWarp.apply_maps`` with
-            ``masks``); off, a silhouette pixel mixes object and background. The mask is
-            ``synthesize_views``'s ``masks``, else the ``background`` threshold (then
-            object pixels darker than it count as background).
-    """
-
-    flow: str = "tvl1"
-    threshold: float = 1.0
-    elevation: float | str = "auto"
-    extent: bool | str = "auto"
-    background: float = 0.05
-    center: float | None = None
-    max_stretch: float = 3.0
-    flow_options: dict[str, object] | None = None
-    blend: str = "linear"
-    silhouette: bool = False
-
-    def flow_kwargs(self) -> dict[str, object]:
-        """Keyword arguments for the scikit-image flow: ``flow_options``, else a fast preset."""
-        if self.flow_options is not None:
-            return dict(self.flow_options)
-        return dict(_FAST_TVL1) if self.flow in ("tvl1", "tvl1-skimage") else {}
-
-    def __post_init__(self) -> None:
-        if self.flow not in FLOW_METHODS:
-            raise ValueError(f"flow must be one of {FLOW_METHODS}, got {self.flow!r}")
-        if isinstance(self.elevation, str):
-            if self.elevation != "auto":
-                raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")
-        elif not abs(check_number(self.elevation, "elevation")) < 90:  # NaN fails too
-            raise ValueError(f"elevation={self.elevation!r} must be an angle in degrees in (-90, 90)")
-        if self.extent != "auto" and not isinstance(self.extent, bool):
-            raise ValueError(f"extent must be True, False or 'auto', got {self.extent!r}")
-        if not isinstance(self.silhouette, bool):
-            raise TypeError(f"silhouette must be a bool, got {type(self.silhouette).__name__}")
-        if self.blend not in BLENDS:
-            raise ValueError(f"blend must be one of {BLENDS}, got {self.blend!r}")
-        check_positive(self.threshold, "threshold")
-        if not check_number(self.max_stretch, "max_stretch") > 0:  # inf: no depth jumps
-            raise ValueError(f"max_stretch={self.max_stretch!r} must be a number > 0")
-        if not math.isfinite(check_number(self.background, "background")):
-            raise ValueError(f"background={self.background!r} must be finite")
-        if self.center is not None and not math.isfinite(check_number(self.center, "center")):
-            raise ValueError(f"center={self.center!r} must be finite or None")
 
 
 @dataclass
@@ -194,175 +107,6 @@ def _pair_index(theta: torch.Tensor, steps: list[float]) -> torch.Tensor:
         return torch.clamp(torch.floor(theta.double() / steps[0]), 0, last).long()
     starts = torch.tensor(seed_angles(steps), dtype=torch.float64)
     return torch.clamp(torch.searchsorted(starts, theta.double(), right=True) - 1, 0, last).long()
-
-
-@dataclass(frozen=True)
-class PairGeometry:
-    """What one seed pair contributes before any warping: correspondences and elevation."""
-
-    correspondence: Correspondence
-    elevation: float
-    seconds: float
-
-
-def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
-    """Validates seed views and their angles.
-
-    Args:
-        seeds: (V, C, H, W) finite float seed views, V >= 2.
-        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
-
-    Returns:
-        ``(seeds, steps)``: the seeds and the V − 1 per-pair angles α_n.
-
-    Raises:
-        TypeError: ``seeds`` is not a float tensor.
-        ValueError: a bad shape, fewer than 2 views, non-finite values or bad angles.
-    """
-    seeds = check_float_tensor(seeds, "seeds")
-    check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
-    if seeds.shape[0] < 2:
-        raise ValueError(f"seeds must hold at least 2 views, got V={seeds.shape[0]}")
-    if min(seeds.shape[1:]) < 1:
-        raise ValueError(f"seeds must have C, H, W >= 1, got shape {tuple(seeds.shape)}")
-    check_finite(seeds, "seeds")
-    return seeds, pair_angles(alpha, seeds.shape[0])
-
-
-def pair_geometry(
-    seeds: torch.Tensor,
-    alpha: float | Sequence[float],
-    options: SynthesisOptions | None = None,
-    masks: torch.Tensor | None = None,
-) -> list[PairGeometry]:
-    """Correspondences (and the elevation) of each consecutive seed pair.
-
-    This is the optical-flow stage, kept apart so that a caller can run it ahead (for
-    example for the next object, in a worker thread, while this one is warped).
-
-    Args:
-        seeds: (V, C, H, W) seed views at 0, α, …, (V − 1)·α.
-        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
-        options: :class:`SynthesisOptions`.
-        masks: optional (V, H, W) bool seed masks, in place of the ``options.background`` threshold.
-
-    Returns:
-        V − 1 :class:`PairGeometry` records.
-    """
-    opts = options or SynthesisOptions()
-    seeds, steps = check_seeds(seeds, alpha)
-    fg = seed_foreground(seeds, masks, opts.background)
-    n_pairs = seeds.shape[0] - 1
-    if opts.flow == "tvl1":  # batched: every pair (both directions) in one call
-        t0 = time.perf_counter()
-        batch = estimate_correspondence(
-            seeds[:-1], seeds[1:], method="tvl1", threshold=opts.threshold, **opts.flow_kwargs()
-        )
-        corrs = list(batch)
-        seconds = [(time.perf_counter() - t0) / n_pairs] * n_pairs
-    else:
-        corrs, seconds = [], []
-        for n in range(n_pairs):
-            t0 = time.perf_counter()
-            kwargs = opts.flow_kwargs()
-            if opts.flow == "rows":
-                kwargs = {"alpha": steps[n], "center": opts.center, **kwargs}
-            corrs.append(
-                estimate_correspondence(
-                    seeds[n : n + 1],
-                    seeds[n + 1 : n + 2],
-                    method=opts.flow,
-                    threshold=opts.threshold,
-                    **kwargs,
-                )
-            )
-            seconds.append(time.perf_counter() - t0)
-    out = []
-    for n, corr in enumerate(corrs):
-        t0 = time.perf_counter()
-        elevation = opts.elevation
-        if elevation == "auto":
-            elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
-        out.append(PairGeometry(corr, float(elevation), seconds[n] + time.perf_counter() - t0))
-    return out
-
-
-def object_geometries(
-    objects: Sequence[torch.Tensor], alpha: float | Sequence[float], options: SynthesisOptions | None = None
-) -> list[list[PairGeometry]]:
-    """:func:`pair_geometry` of many objects; with ``flow="tvl1"`` every seed pair of every
-    object (both directions) is one batched flow call, on the seeds' device.
-
-    Args:
-        objects: per object its (V, C, H, W) seed views, the same shape for all.
-        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
-        options: :class:`SynthesisOptions`.
-
-    Returns:
-        Per object its V − 1 :class:`PairGeometry` records (each pair's seconds a share of
-        the batch's), for :func:`synthesize_views`'s ``geometry``.
-    """
-    opts = options or SynthesisOptions()
-    checked = [check_seeds(s, alpha)[0] for s in objects]
-    if opts.flow != "tvl1" or len(checked) < 2:
-        return [pair_geometry(s, alpha, opts) for s in checked]
-    if len({tuple(s.shape) for s in checked}) > 1:
-        raise ValueError(
-            f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
-        )
-    steps = pair_angles(alpha, checked[0].shape[0])
-    t0 = time.perf_counter()
-    batch = estimate_correspondence(
-        torch.cat([s[:-1] for s in checked]),
-        torch.cat([s[1:] for s in checked]),
-        method="tvl1",
-        threshold=opts.threshold,
-        **opts.flow_kwargs(),
-    )
-    corrs = list(batch)
-    n_pairs = len(steps)
-    share = (time.perf_counter() - t0) / len(corrs)
-    out = []
-    for o, s in enumerate(checked):
-        fg = seed_foreground(s, None, opts.background)
-        geos = []
-        for n in range(n_pairs):
-            elevation = opts.elevation
-            if elevation == "auto":
-                elevation = _auto_elevation(corrs[o * n_pairs + n], steps[n], fg[n : n + 1], opts.center, n)
-            geos.append(PairGeometry(corrs[o * n_pairs + n], float(elevation), share))
-        out.append(geos)
-    return out
-
-
-def _auto_elevation(
-    corr: Correspondence, alpha: float, mask: torch.Tensor, center: float | None, pair: int
-) -> float:
-    """The elevation measured from one pair's vertical flow, or 0 (the paper's untilted
-    camera) with a warning when the flow cannot give one.
-
-    Two cases fall back: no trusted foreground correspondence to fit (a featureless or
-    badly matched pair), and a fit that saturates at ±90 degrees, which no turntable camera
-    has and the warp refuses; both are unreliable flow, not a tilted camera, so the pair is
-    synthesized as the untilted orthographic model, as with ``elevation=0``.
-    """
-    try:
-        elevation = float(estimate_elevation(corr, alpha, center=center, mask=mask)[0])
-    except ValueError as exc:  # no trusted pixel with depth under the mask
-        why = str(exc)
-    else:
-        if math.isfinite(elevation) and abs(elevation) < MAX_AUTO_ELEVATION:
-            return elevation
-        why = (
-            f"the fit gave elevation={elevation:g}, outside (-{MAX_AUTO_ELEVATION:g}, {MAX_AUTO_ELEVATION:g})"
-        )
-    warnings.warn(
-        f"seed pair {pair}: elevation='auto' could not be measured ({why}); using elevation=0, "
-        "the untilted camera (pass a number of degrees to choose another)",
-        ElevationFallbackWarning,
-        stacklevel=3,
-    )
-    return 0.0
 
 
 def synthesize_views(

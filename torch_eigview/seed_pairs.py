@@ -1,0 +1,210 @@
+"""The geometry of consecutive seed pairs before any warping: correspondences and elevation.
+
+This is the optical-flow stage of :func:`~torch_eigview.synthesis.synthesize_views`, kept
+apart so that a caller can run it ahead (for another object, in another thread) or batch
+it over objects (:func:`object_geometries`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+
+from torch_eigview.check import check_finite, check_float_tensor, check_ndim
+from torch_eigview.geometry.angles import pair_angles
+from torch_eigview.geometry.correspondence import Correspondence
+from torch_eigview.geometry.flow import estimate_correspondence
+from torch_eigview.geometry.pose import estimate_elevation
+from torch_eigview.synthesis_options import SynthesisOptions
+from torch_eigview.warp.normalize import seed_foreground
+
+__all__ = [
+    "MAX_AUTO_ELEVATION",
+    "ElevationFallbackWarning",
+    "PairGeometry",
+    "check_seeds",
+    "object_geometries",
+    "pair_geometry",
+]
+
+#: The largest absolute elevation (degrees) an "auto" estimate may have: what NovelViewWarp
+#: accepts, strictly below 90.
+MAX_AUTO_ELEVATION = 89.0
+
+
+class ElevationFallbackWarning(UserWarning):
+    """``elevation="auto"`` could not measure a seed pair's elevation and used 0."""
+
+
+@dataclass(frozen=True)
+class PairGeometry:
+    """What one seed pair contributes before any warping: correspondences and elevation."""
+
+    correspondence: Correspondence
+    elevation: float
+    seconds: float
+
+
+def check_seeds(seeds: torch.Tensor, alpha: object) -> tuple[torch.Tensor, list[float]]:
+    """Validates seed views and their angles.
+
+    Args:
+        seeds: (V, C, H, W) finite float seed views, V >= 2.
+        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
+
+    Returns:
+        ``(seeds, steps)``: the seeds and the V − 1 per-pair angles α_n.
+
+    Raises:
+        TypeError: ``seeds`` is not a float tensor.
+        ValueError: a bad shape, fewer than 2 views, non-finite values or bad angles.
+    """
+    seeds = check_float_tensor(seeds, "seeds")
+    check_ndim(seeds, "seeds", (4,), "(V, C, H, W)")
+    if seeds.shape[0] < 2:
+        raise ValueError(f"seeds must hold at least 2 views, got V={seeds.shape[0]}")
+    if min(seeds.shape[1:]) < 1:
+        raise ValueError(f"seeds must have C, H, W >= 1, got shape {tuple(seeds.shape)}")
+    check_finite(seeds, "seeds")
+    return seeds, pair_angles(alpha, seeds.shape[0])
+
+
+def pair_geometry(
+    seeds: torch.Tensor,
+    alpha: float | Sequence[float],
+    options: SynthesisOptions | None = None,
+    masks: torch.Tensor | None = None,
+) -> list[PairGeometry]:
+    """Correspondences (and the elevation) of each consecutive seed pair.
+
+    This is the optical-flow stage, kept apart so that a caller can run it ahead (for
+    example for the next object, in a worker thread, while this one is warped).
+
+    Args:
+        seeds: (V, C, H, W) seed views at 0, α, …, (V − 1)·α.
+        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
+        options: :class:`SynthesisOptions`.
+        masks: optional (V, H, W) bool seed masks, in place of the ``options.background`` threshold.
+
+    Returns:
+        V − 1 :class:`PairGeometry` records.
+    """
+    opts = options or SynthesisOptions()
+    seeds, steps = check_seeds(seeds, alpha)
+    fg = seed_foreground(seeds, masks, opts.background)
+    n_pairs = seeds.shape[0] - 1
+    if opts.flow == "tvl1":  # batched: every pair (both directions) in one call
+        t0 = time.perf_counter()
+        batch = estimate_correspondence(
+            seeds[:-1], seeds[1:], method="tvl1", threshold=opts.threshold, **opts.flow_kwargs()
+        )
+        corrs = list(batch)
+        seconds = [(time.perf_counter() - t0) / n_pairs] * n_pairs
+    else:
+        corrs, seconds = [], []
+        for n in range(n_pairs):
+            t0 = time.perf_counter()
+            kwargs = opts.flow_kwargs()
+            if opts.flow == "rows":
+                kwargs = {"alpha": steps[n], "center": opts.center, **kwargs}
+            corrs.append(
+                estimate_correspondence(
+                    seeds[n : n + 1],
+                    seeds[n + 1 : n + 2],
+                    method=opts.flow,
+                    threshold=opts.threshold,
+                    **kwargs,
+                )
+            )
+            seconds.append(time.perf_counter() - t0)
+    out = []
+    for n, corr in enumerate(corrs):
+        t0 = time.perf_counter()
+        elevation = opts.elevation
+        if elevation == "auto":
+            elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
+        out.append(PairGeometry(corr, float(elevation), seconds[n] + time.perf_counter() - t0))
+    return out
+
+
+def object_geometries(
+    objects: Sequence[torch.Tensor], alpha: float | Sequence[float], options: SynthesisOptions | None = None
+) -> list[list[PairGeometry]]:
+    """:func:`pair_geometry` of many objects; with ``flow="tvl1"`` every seed pair of every
+    object (both directions) is one batched flow call, on the seeds' device.
+
+    Args:
+        objects: per object its (V, C, H, W) seed views, the same shape for all.
+        alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
+        options: :class:`SynthesisOptions`.
+
+    Returns:
+        Per object its V − 1 :class:`PairGeometry` records (each pair's seconds a share of
+        the batch's), for :func:`synthesize_views`'s ``geometry``.
+    """
+    opts = options or SynthesisOptions()
+    checked = [check_seeds(s, alpha)[0] for s in objects]
+    if opts.flow != "tvl1" or len(checked) < 2:
+        return [pair_geometry(s, alpha, opts) for s in checked]
+    if len({tuple(s.shape) for s in checked}) > 1:
+        raise ValueError(
+            f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
+        )
+    steps = pair_angles(alpha, checked[0].shape[0])
+    t0 = time.perf_counter()
+    batch = estimate_correspondence(
+        torch.cat([s[:-1] for s in checked]),
+        torch.cat([s[1:] for s in checked]),
+        method="tvl1",
+        threshold=opts.threshold,
+        **opts.flow_kwargs(),
+    )
+    corrs = list(batch)
+    n_pairs = len(steps)
+    share = (time.perf_counter() - t0) / len(corrs)
+    out = []
+    for o, s in enumerate(checked):
+        fg = seed_foreground(s, None, opts.background)
+        geos = []
+        for n in range(n_pairs):
+            elevation = opts.elevation
+            if elevation == "auto":
+                elevation = _auto_elevation(corrs[o * n_pairs + n], steps[n], fg[n : n + 1], opts.center, n)
+            geos.append(PairGeometry(corrs[o * n_pairs + n], float(elevation), share))
+        out.append(geos)
+    return out
+
+
+def _auto_elevation(
+    corr: Correspondence, alpha: float, mask: torch.Tensor, center: float | None, pair: int
+) -> float:
+    """The elevation measured from one pair's vertical flow, or 0 (the paper's untilted
+    camera) with a warning when the flow cannot give one.
+
+    Two cases fall back: no trusted foreground correspondence to fit (a featureless or
+    badly matched pair), and a fit that saturates at ±90 degrees, which no turntable camera
+    has and the warp refuses; both are unreliable flow, not a tilted camera, so the pair is
+    synthesized as the untilted orthographic model, as with ``elevation=0``.
+    """
+    try:
+        elevation = float(estimate_elevation(corr, alpha, center=center, mask=mask)[0])
+    except ValueError as exc:  # no trusted pixel with depth under the mask
+        why = str(exc)
+    else:
+        if math.isfinite(elevation) and abs(elevation) < MAX_AUTO_ELEVATION:
+            return elevation
+        why = (
+            f"the fit gave elevation={elevation:g}, outside (-{MAX_AUTO_ELEVATION:g}, {MAX_AUTO_ELEVATION:g})"
+        )
+    warnings.warn(
+        f"seed pair {pair}: elevation='auto' could not be measured ({why}); using elevation=0, "
+        "the untilted camera (pass a number of degrees to choose another)",
+        ElevationFallbackWarning,
+        stacklevel=3,
+    )
+    return 0.0
