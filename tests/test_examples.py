@@ -37,6 +37,7 @@ def test_script_imports(path: Path) -> None:
 
 COIL_EXAMPLES = [
     "bench_correspondence",
+    "bench_synthesis",
     "reject_unknown",
     "coil20_recognition",
     "full_circle",
@@ -76,7 +77,17 @@ def test_train_frozen_features(coil_root: Path) -> None:
 def test_bench_correspondence(coil_root: Path) -> None:
     result = load("bench_correspondence").main(["--root", str(coil_root), "--objects", "1", "--alpha", "20"])
     seconds = result["seconds_per_pair"]
-    assert set(seconds) == {"tvl1 alpha=20", "rows alpha=20"} and all(v > 0 for v in seconds.values())
+    assert set(seconds) == {"tvl1 alpha=20", "tvl1-skimage alpha=20", "rows alpha=20"}
+    assert all(v > 0 for v in seconds.values())
+
+
+@pytest.mark.coil
+def test_bench_synthesis(coil_root: Path) -> None:
+    result = load("bench_synthesis").main(["--root", str(coil_root), "--objects", "3", "--workers", "2"])
+    assert (
+        result["views"] == 3 * 41 and result["seconds"]["threads"] > 0 and result["seconds"]["one thread"] > 0
+    )
+    assert result["same_views"]
 
 
 @pytest.mark.coil

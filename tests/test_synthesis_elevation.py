@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-import torch_eigview.seed_pairs as seed_pairs
+import torch_eigview.synthesis.seed_pairs as seed_pairs
 from torch_eigview.synthesis import (
     MAX_AUTO_ELEVATION,
     ElevationFallbackWarning,

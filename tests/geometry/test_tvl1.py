@@ -160,3 +160,11 @@ def test_max_magnitude() -> None:
     # Differences of two values squared, two of them summed: 8 M² stays finite.
     assert max_magnitude(torch.float32) ** 2 * 8 < torch.finfo(torch.float32).max
     assert max_magnitude(torch.float64) > max_magnitude(torch.float32)
+
+
+def test_pyramid_depth_follows_min_size() -> None:
+    image = torch.rand(1, 128, 96)
+    assert [tuple(p.shape[-2:]) for p in _pyramid(image)] == [(32, 24), (64, 48), (128, 96)]
+    assert len(_pyramid(image, 8)) == 4 and len(_pyramid(image, 64)) == 1
+    with pytest.raises(ValueError, match="min_size"):
+        tvl1_flow(image[0], image[0], min_size=0)

@@ -149,7 +149,14 @@ def bench_threads(
     from torch_eigview.scale.parallel import available_cpus
 
     base = _command(root, objects)
-    settings = {"policy (default)": [], "--threads 1": ["--threads", "1"], "--threads 2": ["--threads", "2"]}
+    # The policy's workers (one thread per CPU, one object each) against one process thread
+    # doing everything, with one and with two intra-op threads.
+    one = ["--workers", "0"] if base[0] == "coil" else []
+    settings = {
+        "policy (default)": [],
+        f"{' '.join(one)} --threads 1".strip(): [*one, "--threads", "1"],
+        f"{' '.join(one)} --threads 2".strip(): [*one, "--threads", "2"],
+    }
     n_procs = neighbour_procs or available_cpus()
     rows = []
     for name, extra in settings.items():
@@ -167,14 +174,14 @@ def report_threads(t: dict[str, Any]) -> None:
     print(
         f"\n== threads: `eigview {t['command']}`, quiet and beside {t['neighbour_procs']} spinning processes"
     )
-    print(f"  {'setting':<18} {'quiet s':>9} {'loaded s':>9} {'loaded/quiet':>13}")
+    print(f"  {'setting':<26} {'quiet s':>9} {'loaded s':>9} {'loaded/quiet':>13}")
 
     def fmt(v: float | None, spec: str) -> str:
         return f"> {t['timeout_s']:.0f}" if v is None else format(v, spec)
 
     for r in t["rows"]:
         print(
-            f"  {r['setting']:<18} {fmt(r['quiet_s'], '9.2f'):>9} {fmt(r['loaded_s'], '9.2f'):>9} "
+            f"  {r['setting']:<26} {fmt(r['quiet_s'], '9.2f'):>9} {fmt(r['loaded_s'], '9.2f'):>9} "
             f"{fmt(r['loaded_over_quiet'], '13.2f'):>13}"
         )
     policy = t["rows"][0]

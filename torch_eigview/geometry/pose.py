@@ -240,7 +240,7 @@ def estimate_elevation(
     Returns:
         (B,) elevations in degrees. A fit outside the model's range saturates at ±90
         (``sin(elevation)`` clamped to [-1, 1]), which is not a camera any warp accepts:
-        :func:`~torch_eigview.seed_pairs.pair_geometry` treats it as no estimate.
+        :func:`~torch_eigview.synthesis.pair_geometry` treats it as no estimate.
 
     Raises:
         TypeError: ``correspondence`` is not a :class:`Correspondence`.

@@ -86,10 +86,10 @@ def _reduce(images: torch.Tensor) -> torch.Tensor:
     return F.interpolate(smoothed[:, None], size=size, mode="bilinear", align_corners=False)[:, 0]
 
 
-def _pyramid(images: torch.Tensor) -> list[torch.Tensor]:
+def _pyramid(images: torch.Tensor, min_size: int = _MIN_SIZE) -> list[torch.Tensor]:
     """(N, H, W) images from the coarsest level to the finest (scikit-image's ``_get_pyramid``)."""
     levels = [images]
-    while len(levels) < _MAX_LEVELS and min(levels[-1].shape[-2:]) > _DOWNSCALE * _MIN_SIZE:
+    while len(levels) < _MAX_LEVELS and min(levels[-1].shape[-2:]) > _DOWNSCALE * min_size:
         levels.append(_reduce(levels[-1]))
     return levels[::-1]
 
@@ -215,6 +215,7 @@ def tvl1_flow(
     num_warp: int = 5,
     num_iter: int = 10,
     tol: float = 1e-4,
+    min_size: int = _MIN_SIZE,
 ) -> torch.Tensor:
     """TV-L1 optical flow of many image pairs at once (scikit-image's algorithm and defaults).
 
@@ -227,6 +228,8 @@ def tvl1_flow(
         num_iter: fixed-point iterations per warp, >= 1.
         tol: a pair stops at a level when its flow changes by less than this per pixel
             (squared) over one warp, >= 0.
+        min_size: the pyramid halves the images while their smaller side exceeds twice
+            this (scikit-image's fixed 16), >= 1; smaller values add coarser levels.
 
     Returns:
         (N, 2, H, W) (or (2, H, W)) flow in the images' dtype and device, rows first:
@@ -267,11 +270,12 @@ def tvl1_flow(
     check_positive(tol, "tol", allow_zero=True)
     num_warp = check_int(num_warp, "num_warp", minimum=1)
     num_iter = check_int(num_iter, "num_iter", minimum=1)
+    min_size = check_int(min_size, "min_size", minimum=1)
     single = ref.ndim == 2
     ref, mov = (ref[None], mov[None]) if single else (ref, mov)
     if ref.shape[0] == 0:
         return ref.new_zeros(0, 2, *ref.shape[1:])
-    levels = list(zip(_pyramid(ref), _pyramid(mov), strict=True))
+    levels = list(zip(_pyramid(ref, min_size), _pyramid(mov, min_size), strict=True))
     flow = ref.new_zeros(ref.shape[0], 2, *levels[0][0].shape[-2:])
     for i, (r, m) in enumerate(levels):
         if i > 0:

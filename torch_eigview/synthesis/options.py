@@ -1,5 +1,5 @@
 """How seed views become novel views: :class:`SynthesisOptions`, shared by the seed pairs'
-geometry (:mod:`torch_eigview.seed_pairs`) and the warp (:mod:`torch_eigview.synthesis`)."""
+geometry (:mod:`~torch_eigview.synthesis.seed_pairs`) and the warp (:mod:`~torch_eigview.synthesis.views`)."""
 
 from __future__ import annotations
 

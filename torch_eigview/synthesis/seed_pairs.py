@@ -1,6 +1,6 @@
 """The geometry of consecutive seed pairs before any warping: correspondences and elevation.
 
-This is the optical-flow stage of :func:`~torch_eigview.synthesis.synthesize_views`, kept
+This is the optical-flow stage of :func:`~torch_eigview.synthesis.views.synthesize_views`, kept
 apart so that a caller can run it ahead (for another object, in another thread) or batch
 it over objects (:func:`object_geometries`).
 """
@@ -20,7 +20,7 @@ from torch_eigview.geometry.angles import pair_angles
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import estimate_elevation
-from torch_eigview.synthesis_options import SynthesisOptions
+from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.warp.normalize import seed_foreground
 
 __all__ = [
