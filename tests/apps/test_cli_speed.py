@@ -67,10 +67,10 @@ def test_threads_applied_in_the_command_and_restored(
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA not available")
 def test_cuda_run_matches_cpu_and_counts_host_copies(coil_root: Path) -> None:
-    """On CUDA the views, warp, eigenspace and recognition run on the device; the profiler
-    counts the device-to-host copies of the run. The optical flow is still scikit-image on
-    the CPU, so each seed pair goes to the host once (and its correspondence back); the
-    count is bounded by a few copies per object, not per view."""
+    """On CUDA the views, the TV-L1 flow (torch), the warp, eigenspace and recognition run on
+    the device; the profiler counts the device-to-host copies of the run. No image goes to
+    the host; what remains are scalar reads (the flow's input checks, the maps' branch and
+    stopping tests), a few per object and seed pair, not per view."""
     from torch.profiler import ProfilerActivity, profile
 
     cpu, gpu = io.StringIO(), io.StringIO()

@@ -13,8 +13,6 @@ import dataclasses
 
 import numpy as np
 import torch
-from skimage.registration import optical_flow_ilk, optical_flow_tvl1
-
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.row_matcher import match_rows
@@ -157,6 +155,10 @@ def _skimage_flow(
         empty = v1.new_zeros(0, *v1.shape[-2:])
         mask = torch.zeros(empty.shape, dtype=torch.bool, device=v1.device)
         return Correspondence(empty, empty.clone(), mask, mask.clone(), empty.clone(), empty.clone())
+    # Imported here: scikit-image's registration pulls in scipy.ndimage, which the default
+    # torch flow does not need (a few tenths of a second of every command's start).
+    from skimage.registration import optical_flow_ilk, optical_flow_tvl1
+
     flow = optical_flow_tvl1 if method == "tvl1-skimage" else optical_flow_ilk
     d12, d21, v12, v21 = [], [], [], []
     # A diverging flow is reported below with its cause, not as numpy's RuntimeWarnings.
