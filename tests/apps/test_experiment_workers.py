@@ -96,3 +96,19 @@ def test_bad_workers_flag(value: str, coil_root: Path, capsys: pytest.CaptureFix
         main(["coil", "--root", str(coil_root), "--alpha", "10", "--workers", value])
     assert exc.value.code == 2
     assert f"--workers must be 'auto' or an integer >= 0, got {value!r}" in capsys.readouterr().err
+
+
+def test_worker_kind_follows_the_flow() -> None:
+    """auto: processes for the scikit-image flows (they hold the GIL), threads for torch's."""
+    import argparse
+
+    from torch_eigview.apps.coil_command import _worker_kind
+
+    for flow, kind in (
+        ("tvl1", "thread"),
+        ("rows", "thread"),
+        ("ilk", "process"),
+        ("tvl1-skimage", "process"),
+    ):
+        assert _worker_kind(argparse.Namespace(worker_kind="auto", flow=flow)) == kind
+    assert _worker_kind(argparse.Namespace(worker_kind="thread", flow="ilk")) == "thread"

@@ -168,3 +168,23 @@ def test_pyramid_depth_follows_min_size() -> None:
     assert len(_pyramid(image, 8)) == 4 and len(_pyramid(image, 64)) == 1
     with pytest.raises(ValueError, match="min_size"):
         tvl1_flow(image[0], image[0], min_size=0)
+
+
+def test_prefilter_is_scikit_images() -> None:
+    a, b = _rendered(10.0)
+    ref = optical_flow_tvl1(a, b, prefilter=True, **FAST)
+    ours = tvl1_flow(torch.from_numpy(a).float(), torch.from_numpy(b).float(), prefilter=True, **FAST)
+    _agree(ours.numpy(), ref)
+    flow = torch.from_numpy(np.random.default_rng(2).standard_normal((1, 2, 9, 13)).astype(np.float32))
+    from torch_eigview.geometry.tvl1 import _median3
+
+    np.testing.assert_array_equal(
+        _median3(flow)[0].numpy(), ndi.median_filter(flow[0].numpy(), size=(1, 3, 3))
+    )
+
+
+def test_inputs_that_require_grad() -> None:
+    a, b = (torch.from_numpy(v).float() for v in _rendered(10.0, size=32))
+    out = tvl1_flow(a.requires_grad_(), b, **FAST)
+    assert not out.requires_grad
+    torch.testing.assert_close(out, tvl1_flow(a.detach(), b, **FAST))

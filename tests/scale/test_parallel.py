@@ -113,7 +113,7 @@ def _job(i: int) -> tuple[int, int, list[str]]:
 
 def test_thread_pool_in_order_with_each_jobs_warnings() -> None:
     before = torch.get_num_threads()
-    out = list(map_ordered(_job, [(i,) for i in range(5)], 3, kind="thread"))
+    out = list(map_ordered(_job, [(i,) for i in range(5)], 3, kind="thread", always=(UserWarning,)))
     assert [o[0] for o in out] == list(range(5))
     assert all(o[1] == before for o in out)  # the caller's intra-op threads, unchanged
     assert [o[2] for o in out] == [[f"job {i}"] for i in range(5)]
@@ -128,3 +128,34 @@ def test_thread_pool_error_and_bad_kind() -> None:
         list(map_ordered(_job, [(i,) for i in range(8)], 2, kind="thread"))
     with pytest.raises(ValueError, match=r"kind='fiber' must be one of \('process', 'thread'\)"):
         list(map_ordered(_job, [(1,)], 2, kind="fiber"))
+
+
+def test_thread_pools_keep_the_callers_warning_state() -> None:
+    """The caller's filters stay in force while a pool is open, pools may close in any
+    order, and the handler and filters are the caller's again after both."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the caller's choice
+        before = (warnings.showwarning, list(warnings.filters))
+        g1 = map_ordered(_job, [(i,) for i in range(3)], 1, kind="thread")
+        g2 = map_ordered(_job, [(i,) for i in range(3)], 1, kind="thread", always=(UserWarning,))
+        assert next(g1)[2] == [] and next(g2)[2] == ["job 0"]  # g1 names no category: ignored
+        with warnings.catch_warnings(record=True) as seen:  # a consumer's own warning
+            warnings.warn("consumer", RuntimeWarning, stacklevel=1)
+        assert seen == []  # RuntimeWarning is still ignored
+        g1.close()
+        assert next(g2)[2] == ["job 1"]  # g2's jobs still get their own warnings
+        g2.close()
+        assert (warnings.showwarning, list(warnings.filters)) == before
+
+
+def test_nested_job_warnings_keep_the_outer_list() -> None:
+    def job() -> list[str]:
+        with job_warnings(UserWarning) as outer:
+            with job_warnings(UserWarning) as inner:
+                warnings.warn("inner", UserWarning, stacklevel=1)
+            warnings.warn("after inner", UserWarning, stacklevel=1)
+        assert [str(w.message) for w in inner] == ["inner"]
+        return [str(w.message) for w in outer]
+
+    assert list(map_ordered(job, [()], 1, kind="thread", always=(UserWarning,))) == [["after inner"]]
+    assert job() == ["after inner"]  # the same without a pool

@@ -141,10 +141,11 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     )
     coil.add_argument(
         "--worker-kind",
-        choices=("thread", "process"),
-        default="thread",
-        help="threads of this process (default: the torch flows and the warp release the GIL), or "
-        "spawned processes (for the scikit-image flows, which hold it)",
+        choices=("auto", "thread", "process"),
+        default="auto",
+        help="threads of this process (the torch flows and the warp release the GIL) or spawned "
+        "processes (for the scikit-image flows, which hold it); auto (default): processes for "
+        "--flow ilk and tvl1-skimage, else threads",
     )
     add_quiet(coil)
     add_threads(coil)
@@ -273,8 +274,8 @@ def run_coil(args: argparse.Namespace) -> int:
         interpolate_pose=args.pose == "interpolate",
         overlap=0.0 if args.overlap is None else args.overlap,
     )
+    experiment.worker_kind = _worker_kind(args)
     experiment.workers = _workers(args, experiment, folder)
-    experiment.worker_kind = args.worker_kind
     if args.seeds is not None:
         experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
     if args.kernel and args.save:
@@ -297,6 +298,14 @@ def run_coil(args: argparse.Namespace) -> int:
     return 0
 
 
+def _worker_kind(args: argparse.Namespace) -> str:
+    """``--worker-kind``: as given, or for ``auto`` processes for the scikit-image flows (they
+    hold Python's GIL, so threads would take turns) and threads for the torch ones."""
+    if args.worker_kind != "auto":
+        return str(args.worker_kind)
+    return "process" if args.flow in ("ilk", "tvl1-skimage") else "thread"
+
+
 def _workers(args: argparse.Namespace, experiment: CoilExperiment, folder: CoilFolder) -> int:
     """``--workers``: the number given, or for ``auto`` :func:`object_workers`'s choice."""
     from torch_eigview.scale.parallel import object_workers
@@ -313,7 +322,7 @@ def _workers(args: argparse.Namespace, experiment: CoilExperiment, folder: CoilF
     )
     some = folder.objects[0]  # the folder's images share one size
     pixels = folder.image(some, folder.poses(some)[0])[0].numel()
-    return object_workers(per_object * n_objects, pixels, n_objects, kind=args.worker_kind)
+    return object_workers(per_object * n_objects, pixels, n_objects, kind=experiment.worker_kind)
 
 
 def _device(name: str) -> torch.device:

@@ -13,6 +13,7 @@ and draws the eigenimages and, for one object, synthesized views beside rendered
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
@@ -129,8 +130,9 @@ def _gallery_blocks(
     workers = object_workers(0, 0, len(scene.shapes), kind="thread")
     jobs = ((scene, name, alpha, n_views, synth, correspondences) for name in scene.shapes)
     results = map_ordered(synthetic_gallery, jobs, workers, kind="thread")
-    for i, (_, (views, thetas)) in enumerate(zip(names, results, strict=True)):
-        yield views, i, thetas
+    with contextlib.closing(results):  # an error here ends the pool
+        for i, (_, (views, thetas)) in enumerate(zip(names, results, strict=True)):
+            yield views, i, thetas
 
 
 def format_table(

@@ -26,6 +26,7 @@ views every ``dense_step`` degrees.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 import warnings
@@ -297,16 +298,18 @@ class CoilExperiment:
         outcome: tuple[SynthesizedViews, list[CaughtWarning]] | ValueError,
         seconds: dict[str, float],
         elevations: dict[int, list[float]],
+        caught_all: list[CaughtWarning],
     ) -> tuple[torch.Tensor, int, list[float]]:
         """``(views, obj, poses)`` of one object's synthesized gallery; adds its times to
-        ``seconds`` and its elevations to ``elevations``, and re-issues its warnings."""
+        ``seconds``, its elevations to ``elevations`` and its warnings, the object named,
+        to ``caught_all``."""
         if isinstance(outcome, ValueError):  # e.g. a flow that cannot match this object's seeds
             raise ValueError(f"object {obj}: synthesis failed: {outcome}") from outcome
         out, caught = outcome
-        for message, category, filename, lineno in caught:  # re-issued with the object named
+        for message, category, filename, lineno in caught:
             if issubclass(category, ElevationFallbackWarning):
                 message = f"object {obj}: {message}"
-            warnings.warn_explicit(message, category, filename, lineno)
+            caught_all.append((message, category, filename, lineno))
         for key, value in out.seconds.items():
             seconds[key] += value
         elevations[obj] = out.elevations
@@ -329,9 +332,21 @@ class CoilExperiment:
         workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
         copy = workers > 0 and self.worker_kind == "process"
         jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
-        results = map_ordered(synthesize_object, jobs, workers, finish=own_outcome, kind=self.worker_kind)
-        for obj, outcome in zip(ticks, results, strict=True):
-            yield self._synthesized_gallery(obj, outcome, seconds, elevations)
+        results = map_ordered(
+            synthesize_object,
+            jobs,
+            workers,
+            finish=own_outcome,
+            kind=self.worker_kind,
+            always=(ElevationFallbackWarning,),
+        )
+        caught: list[CaughtWarning] = []
+        with contextlib.closing(results):  # an error here ends the pool (and its warning routing)
+            for obj, outcome in zip(ticks, results, strict=True):
+                yield self._synthesized_gallery(obj, outcome, seconds, elevations, caught)
+        # Re-issued once the pool is closed, under the caller's own warning filters.
+        for message, category, filename, lineno in caught:
+            warnings.warn_explicit(message, category, filename, lineno)
 
     def run(
         self,

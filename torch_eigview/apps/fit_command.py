@@ -13,6 +13,7 @@ names as label names and the seed azimuths, for ``eigview evaluate`` and ``eigvi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import math
 from collections.abc import Iterator
@@ -347,11 +348,12 @@ def run_fit(args: argparse.Namespace) -> int:
         # One thread per CPU, one object each (torch kernels release the GIL); in order.
         workers = object_workers(0, 0, len(objects), kind="thread")
         results = map_ordered(gallery, ((obj,) for obj in objects), workers, kind="thread")
-        for label, (_, (views, poses, held_out)) in enumerate(
-            zip(loop(objects) if loop else objects, results, strict=True)
-        ):
-            held_views.append(held_out)
-            yield views, label, poses
+        with contextlib.closing(results):  # an error here ends the pool
+            for label, (_, (views, poses, held_out)) in enumerate(
+                zip(loop(objects) if loop else objects, results, strict=True)
+            ):
+                held_views.append(held_out)
+                yield views, label, poses
 
     x, labels, poses = stack_gallery(blocks())
     try:

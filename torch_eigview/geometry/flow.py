@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 import torch
+
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.row_matcher import match_rows
@@ -113,8 +114,10 @@ def _torch_tvl1(
             f"squared gradients overflow beyond {max_magnitude(torch.float32):.3g}): the views must be image "
             f"intensities, e.g. in [0, 1]"
         )
-    # Grayscale as the reference path makes it (float64 mean, then scikit-image's float32).
-    g1, g2 = (v.detach().double().mean(dim=1).float() for v in (v1, v2))
+    # Grayscale as the reference path makes it (float64 mean, then scikit-image's float32),
+    # where the device has float64 (not MPS).
+    wide = torch.float64 if v1.device.type in ("cpu", "cuda") else torch.float32
+    g1, g2 = (v.detach().to(wide).mean(dim=1).float() for v in (v1, v2))
     with torch.no_grad():
         flow = tvl1_flow(torch.cat([g1, g2]), torch.cat([g2, g1]), **flow_kwargs)  # type: ignore[arg-type]
     if not bool(torch.isfinite(flow).all()):

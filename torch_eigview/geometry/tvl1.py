@@ -125,6 +125,16 @@ def _warp(moving: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
     return out[:, 0]
 
 
+def _median3(flow: torch.Tensor) -> torch.Tensor:
+    """(N, 2, H, W) flow through a 3 × 3 median per component, scipy's
+    ``median_filter(size=[1, 3, 3], mode="reflect")`` (scikit-image's ``prefilter``)."""
+    n, c, h, w = flow.shape
+    rows = flow.index_select(2, _symmetric_index(h, 1, flow.device))
+    padded = rows.index_select(3, _symmetric_index(w, 1, flow.device))
+    patches = padded.unfold(2, 3, 1).unfold(3, 3, 1)  # (N, 2, H, W, 3, 3)
+    return patches.reshape(n, c, h, w, 9).median(dim=-1).values
+
+
 def _gradient(image: torch.Tensor) -> torch.Tensor:
     """``numpy.gradient`` of (N, H, W) along rows and columns: (N, 2, H, W), central
     differences inside, one-sided at the edges."""
@@ -149,6 +159,7 @@ def _level(
     num_warp: int,
     num_iter: int,
     tol: float,
+    prefilter: bool,
 ) -> torch.Tensor:
     """scikit-image's ``_tvl1`` at one pyramid level for (N, H, W) pairs; ``flow`` (N, 2, H, W)
     is the initial flow (not modified)."""
@@ -162,6 +173,8 @@ def _level(
     proj = flow.new_zeros(n, 2, 2, h, w)  # the dual variable per flow component and axis
     active = torch.ones(n, dtype=torch.bool, device=flow.device)
     for _ in range(num_warp):
+        if prefilter:
+            flow = _median3(flow)
         warped = _warp(moving, flow)
         grad = _gradient(warped)
         ni = torch.addcmul(grad[:, 0] * grad[:, 0], grad[:, 1], grad[:, 1])
@@ -215,6 +228,7 @@ def tvl1_flow(
     num_warp: int = 5,
     num_iter: int = 10,
     tol: float = 1e-4,
+    prefilter: bool = False,
     min_size: int = _MIN_SIZE,
 ) -> torch.Tensor:
     """TV-L1 optical flow of many image pairs at once (scikit-image's algorithm and defaults).
@@ -228,12 +242,14 @@ def tvl1_flow(
         num_iter: fixed-point iterations per warp, >= 1.
         tol: a pair stops at a level when its flow changes by less than this per pixel
             (squared) over one warp, >= 0.
+        prefilter: pass the flow through a 3 × 3 median before each warp.
         min_size: the pyramid halves the images while their smaller side exceeds twice
             this (scikit-image's fixed 16), >= 1; smaller values add coarser levels.
 
     Returns:
         (N, 2, H, W) (or (2, H, W)) flow in the images' dtype and device, rows first:
-        ``moving[r + flow[0], c + flow[1]] ≈ reference[r, c]``.
+        ``moving[r + flow[0], c + flow[1]] ≈ reference[r, c]``. Not differentiable: the
+        images enter detached (the solver writes its buffers in place).
 
     Raises:
         TypeError: the images are not float tensors.
@@ -271,6 +287,9 @@ def tvl1_flow(
     num_warp = check_int(num_warp, "num_warp", minimum=1)
     num_iter = check_int(num_iter, "num_iter", minimum=1)
     min_size = check_int(min_size, "min_size", minimum=1)
+    if not isinstance(prefilter, bool):
+        raise TypeError(f"prefilter must be a bool, got {type(prefilter).__name__}")
+    ref, mov = ref.detach(), mov.detach()
     single = ref.ndim == 2
     ref, mov = (ref[None], mov[None]) if single else (ref, mov)
     if ref.shape[0] == 0:
@@ -280,5 +299,5 @@ def tvl1_flow(
     for i, (r, m) in enumerate(levels):
         if i > 0:
             flow = _upsample_flow(flow, (r.shape[-2], r.shape[-1]))
-        flow = _level(r, m, flow, attachment, tightness, num_warp, num_iter, tol)
+        flow = _level(r, m, flow, attachment, tightness, num_warp, num_iter, tol, prefilter)
     return flow[0] if single else flow

@@ -5,9 +5,12 @@ so that the caller can re-issue them with the job named (a worker process's woul
 otherwise be lost). ``warnings.catch_warnings`` records them in a process that runs one
 job at a time, but it swaps process-wide state (the filters and ``showwarning``), so two
 threads inside it at once would record each other's warnings and restore each other's
-state. A thread pool therefore runs under :func:`routing`: one handler, installed once
-by the calling thread, hands every warning to the list of the job whose thread raised it
-(:func:`job_warnings`).
+state. A thread pool therefore runs under :func:`routing`: one handler for the whole
+process, installed by the first pool open and removed by the last one to close, hands
+every warning shown in a thread inside :func:`job_warnings` to that job's list, and
+everything else to the handler that was there before. The caller's filters stay in force;
+only the categories a pool names are shown every time (not once per place) while it is
+open, so that each job's warning reaches its own list.
 
 Example:
     >>> import warnings
@@ -29,35 +32,74 @@ __all__ = ["job_warnings", "routing"]
 
 _LOCAL = threading.local()
 _LOCK = threading.Lock()
-_ROUTES = [0]  # routing() contexts open in this process
+# The open routing() contexts and the handler that was installed before the first one.
+_STATE: dict[str, Any] = {"depth": 0, "previous": None}
+
+
+def _route(
+    message: Any, category: Any, filename: Any, lineno: Any, file: Any = None, line: Any = None
+) -> None:
+    sink = getattr(_LOCAL, "sink", None)
+    if sink is None:
+        _STATE["previous"](message, category, filename, lineno, file, line)
+    else:
+        sink.append(warnings.WarningMessage(message, category, filename, lineno, file, line))
+
+
+def _filter_list() -> list[tuple[Any, ...]]:
+    return warnings.filters  # type: ignore[return-value]  # a list, typed as a Sequence
+
+
+def _filters_changed() -> None:
+    # What warnings.filterwarnings does after changing the list: the modules' registries
+    # of warnings already shown are keyed by a version of the filters.
+    mutated = getattr(warnings, "_filters_mutated", None)
+    if callable(mutated):
+        mutated()
+
+
+def _remove_filters(entries: list[tuple[Any, ...]]) -> None:
+    filters = _filter_list()
+    for entry in entries:
+        for i, existing in enumerate(filters):
+            if existing is entry:  # ours, not an equal one of the caller's
+                del filters[i]
+                break
+    if entries:
+        _filters_changed()
 
 
 @contextmanager
-def routing() -> Iterator[None]:
-    """While open, every warning raised in a thread inside :func:`job_warnings` goes to that
-    job's list, shown every time (each job's caller decides what to show); the others go
-    to the handler that was there before. Enter it in the thread that starts the pool."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("always")
-        shown = warnings.showwarning
+def routing(*always: type[Warning]) -> Iterator[None]:
+    """While open, a warning shown in a thread inside :func:`job_warnings` goes to that job's
+    list; the others go to the handler that was there before. Enter it in the thread that
+    starts the pool; pools may open and close in any order.
 
-        def show(
-            message: Any, category: Any, filename: Any, lineno: Any, file: Any = None, line: Any = None
-        ) -> None:
-            sink = getattr(_LOCAL, "sink", None)
-            if sink is None:
-                shown(message, category, filename, lineno, file, line)
-            else:
-                sink.append(warnings.WarningMessage(message, category, filename, lineno, file, line))
-
-        warnings.showwarning = show
+    Args:
+        *always: categories shown every time while the pool is open (each job needs its
+            own copy, not the first job's alone); the caller's filters decide the rest.
+    """
+    with _LOCK:
+        if _STATE["depth"] == 0:
+            _STATE["previous"] = warnings.showwarning
+            warnings.showwarning = _route
+        _STATE["depth"] += 1
+        added: list[tuple[Any, ...]] = [("always", None, category, None, 0) for category in always]
+        filters = _filter_list()
+        for entry in added:
+            filters.insert(0, entry)
+        if added:
+            _filters_changed()
+    try:
+        yield
+    finally:
         with _LOCK:
-            _ROUTES[0] += 1
-        try:
-            yield
-        finally:
-            with _LOCK:
-                _ROUTES[0] -= 1
+            _remove_filters(added)
+            _STATE["depth"] -= 1
+            if _STATE["depth"] == 0:
+                if warnings.showwarning is _route:  # not replaced by someone else meanwhile
+                    warnings.showwarning = _STATE["previous"]
+                _STATE["previous"] = None
 
 
 @contextmanager
@@ -66,18 +108,19 @@ def job_warnings(*always: type[Warning]) -> Iterator[list[warnings.WarningMessag
 
     Args:
         *always: categories recorded every time they are raised, not once per place
-            (under :func:`routing` every category is).
+            (under :func:`routing`, the categories its pool names are).
 
     Yields:
         A list of ``warnings.WarningMessage``.
     """
-    if _ROUTES[0]:  # a pool's thread (the handler routes by thread)
+    if _STATE["depth"]:  # a pool's thread: the handler routes by thread
         sink: list[warnings.WarningMessage] = []
+        previous = getattr(_LOCAL, "sink", None)
         _LOCAL.sink = sink
         try:
             yield sink
         finally:
-            _LOCAL.sink = None
+            _LOCAL.sink = previous
         return
     with warnings.catch_warnings(record=True) as caught:
         for category in always:

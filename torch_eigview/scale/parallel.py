@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import ExitStack
 from typing import Any, TypeVar
@@ -174,7 +174,8 @@ def map_ordered(
     *,
     finish: Callable[[R], R] | None = None,
     kind: str = "process",
-) -> Iterator[R]:
+    always: tuple[type[Warning], ...] = (),
+) -> Generator[R, None, None]:
     """``fn(*job)`` for each job, in the order of ``jobs``, over ``workers`` processes or threads.
 
     At most ``2 · workers`` jobs are in flight (``jobs`` is consumed lazily), and an error
@@ -198,9 +199,13 @@ def map_ordered(
         finish: applied to each result of a worker process in this process (e.g. to copy
             its tensors out of shared memory); not to results computed in this process.
         kind: ``"process"`` or ``"thread"``.
+        always: with threads, warning categories shown every time while the pool is open
+            (:func:`~torch_eigview.scale.job_warnings.routing`), so that each job's
+            :func:`~torch_eigview.scale.job_warnings.job_warnings` gets its own.
 
     Yields:
-        The results, in order.
+        The results, in order. Close the generator (``contextlib.closing``) if you stop
+        early or may raise while consuming: that ends the pool and its warning routing.
     """
     workers = check_int(workers, "workers", minimum=0)
     kind = check_choice(kind, "kind", KINDS)
@@ -210,7 +215,7 @@ def map_ordered(
         return
     with ExitStack() as stack:
         if kind == "thread":
-            stack.enter_context(routing())
+            stack.enter_context(routing(*always))
             pool: Executor = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="eigview-job")
         else:
             pool = ProcessPoolExecutor(

@@ -37,9 +37,11 @@ class SynthesisOptions:
         background: intensity below which a pixel is background (``extent``, elevation fit).
         center: column of the rotation axis, default the image's centre column.
         max_stretch: see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`.
-        flow_options: keyword arguments for the scikit-image flow function. By default
-            TV-L1 runs 3 warps of 5 iterations (scikit-image's defaults are 5 and 10):
-            3x faster, and on COIL-20 as accurate (see the README).
+        flow_options: keyword arguments for the flow function (TV-L1's ``num_warp``,
+            ``num_iter``, ``tol``, ``prefilter``, …; the same names for the torch and the
+            scikit-image TV-L1). By default TV-L1 runs 3 warps of 5 iterations
+            (scikit-image's defaults are 5 and 10): 3x faster, and on COIL-20 as accurate
+            (see the README).
         blend: how the two seeds of a pair share the pixels both see, ``"linear"`` or
             ``"nearest"`` (see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`).
         silhouette: silhouette-aware sampling: only the seeds' foreground pixels
@@ -62,7 +64,7 @@ class SynthesisOptions:
     silhouette: bool = False
 
     def flow_kwargs(self) -> dict[str, object]:
-        """Keyword arguments for the scikit-image flow: ``flow_options``, else a fast preset."""
+        """Keyword arguments for the flow function: ``flow_options``, else a fast preset."""
         if self.flow_options is not None:
             return dict(self.flow_options)
         return dict(_FAST_TVL1) if self.flow in ("tvl1", "tvl1-skimage") else {}

@@ -133,7 +133,10 @@ def pair_geometry(
 
 
 def object_geometries(
-    objects: Sequence[torch.Tensor], alpha: float | Sequence[float], options: SynthesisOptions | None = None
+    objects: Sequence[torch.Tensor],
+    alpha: float | Sequence[float],
+    options: SynthesisOptions | None = None,
+    masks: Sequence[torch.Tensor | None] | None = None,
 ) -> list[list[PairGeometry]]:
     """:func:`pair_geometry` of many objects; with ``flow="tvl1"`` every seed pair of every
     object (both directions) is one batched flow call, on the seeds' device.
@@ -142,15 +145,21 @@ def object_geometries(
         objects: per object its (V, C, H, W) seed views, the same shape for all.
         alpha: angle between consecutive seed views in degrees, or one per pair (V − 1).
         options: :class:`SynthesisOptions`.
+        masks: per object its (V, H, W) bool seed masks or None (the ``options.background``
+            threshold), as :func:`pair_geometry`'s ``masks``.
 
     Returns:
-        Per object its V − 1 :class:`PairGeometry` records (each pair's seconds a share of
-        the batch's), for :func:`synthesize_views`'s ``geometry``.
+        Per object its V − 1 :class:`PairGeometry` records (each pair's seconds its share
+        of the batched flow plus its own elevation fit), for :func:`synthesize_views`'s
+        ``geometry``.
     """
     opts = options or SynthesisOptions()
     checked = [check_seeds(s, alpha)[0] for s in objects]
+    per_mask = list(masks) if masks is not None else [None] * len(checked)
+    if len(per_mask) != len(checked):
+        raise ValueError(f"masks must hold one entry per object ({len(checked)}), got {len(per_mask)}")
     if opts.flow != "tvl1" or len(checked) < 2:
-        return [pair_geometry(s, alpha, opts) for s in checked]
+        return [pair_geometry(s, alpha, opts, m) for s, m in zip(checked, per_mask, strict=True)]
     if len({tuple(s.shape) for s in checked}) > 1:
         raise ValueError(
             f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
@@ -168,14 +177,16 @@ def object_geometries(
     n_pairs = len(steps)
     share = (time.perf_counter() - t0) / len(corrs)
     out = []
-    for o, s in enumerate(checked):
-        fg = seed_foreground(s, None, opts.background)
+    for o, (s, m) in enumerate(zip(checked, per_mask, strict=True)):
+        fg = seed_foreground(s, m, opts.background)
         geos = []
         for n in range(n_pairs):
+            t1 = time.perf_counter()
+            corr = corrs[o * n_pairs + n]
             elevation = opts.elevation
             if elevation == "auto":
-                elevation = _auto_elevation(corrs[o * n_pairs + n], steps[n], fg[n : n + 1], opts.center, n)
-            geos.append(PairGeometry(corrs[o * n_pairs + n], float(elevation), share))
+                elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
+            geos.append(PairGeometry(corr, float(elevation), share + time.perf_counter() - t1))
         out.append(geos)
     return out
 
