@@ -26,10 +26,8 @@ views every ``dense_step`` degrees.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
-import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,7 +39,7 @@ from torch_eigview.apps.circle import (
     check_overlap,
     circle_layout,
 )
-from torch_eigview.apps.object_synthesis import CaughtWarning, own_outcome, synthesize_object
+from torch_eigview.apps.object_synthesis import object_galleries
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
 from torch_eigview.check import (
     VIEW_LIMIT,
@@ -56,11 +54,9 @@ from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import wrap_angle
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
-from torch_eigview.scale.parallel import KINDS, map_ordered
+from torch_eigview.scale.parallel import KINDS
 from torch_eigview.synthesis import (
-    ElevationFallbackWarning,
     SynthesisOptions,
-    SynthesizedViews,
 )
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
@@ -292,29 +288,6 @@ class CoilExperiment:
         angles = None if layout is not None else self.synth_angles()
         return seeds, self.alpha, angles, self.synth[2], self.synthesis, self.overlap
 
-    def _synthesized_gallery(
-        self,
-        obj: int,
-        outcome: tuple[SynthesizedViews, list[CaughtWarning]] | ValueError,
-        seconds: dict[str, float],
-        elevations: dict[int, list[float]],
-        caught_all: list[CaughtWarning],
-    ) -> tuple[torch.Tensor, int, list[float]]:
-        """``(views, obj, poses)`` of one object's synthesized gallery; adds its times to
-        ``seconds``, its elevations to ``elevations`` and its warnings, the object named,
-        to ``caught_all``."""
-        if isinstance(outcome, ValueError):  # e.g. a flow that cannot match this object's seeds
-            raise ValueError(f"object {obj}: synthesis failed: {outcome}") from outcome
-        out, caught = outcome
-        for message, category, filename, lineno in caught:
-            if issubclass(category, ElevationFallbackWarning):
-                message = f"object {obj}: {message}"
-            caught_all.append((message, category, filename, lineno))
-        for key, value in out.seconds.items():
-            seconds[key] += value
-        elevations[obj] = out.elevations
-        return out.views, obj, [self._center + t for t in out.thetas.tolist()]
-
     def _galleries(
         self,
         folder: CoilFolder,
@@ -332,21 +305,11 @@ class CoilExperiment:
         workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
         copy = workers > 0 and self.worker_kind == "process"
         jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
-        results = map_ordered(
-            synthesize_object,
-            jobs,
-            workers,
-            finish=own_outcome,
-            kind=self.worker_kind,
-            always=(ElevationFallbackWarning,),
-        )
-        caught: list[CaughtWarning] = []
-        with contextlib.closing(results):  # an error here ends the pool (and its warning routing)
-            for obj, outcome in zip(ticks, results, strict=True):
-                yield self._synthesized_gallery(obj, outcome, seconds, elevations, caught)
-        # Re-issued once the pool is closed, under the caller's own warning filters.
-        for message, category, filename, lineno in caught:
-            warnings.warn_explicit(message, category, filename, lineno)
+        for obj, out in object_galleries(jobs, ticks, workers, self.worker_kind):
+            for key, value in out.seconds.items():
+                seconds[key] += value
+            elevations[obj] = out.elevations
+            yield out.views, obj, [self._center + t for t in out.thetas.tolist()]
 
     def run(
         self,

@@ -98,6 +98,14 @@ def estimate_correspondence(
     return _skimage_flow(v1, v2, method, threshold, flow_kwargs)
 
 
+def _diverged(method: str, largest: float) -> ValueError:
+    """The error of a flow that came back with NaN or infinite values."""
+    return ValueError(
+        f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
+        f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
+    )
+
+
 def _torch_tvl1(
     v1: torch.Tensor, v2: torch.Tensor, threshold: float, flow_kwargs: dict[str, object]
 ) -> Correspondence:
@@ -121,10 +129,7 @@ def _torch_tvl1(
     with torch.no_grad():
         flow = tvl1_flow(torch.cat([g1, g2]), torch.cat([g2, g1]), **flow_kwargs)  # type: ignore[arg-type]
     if not bool(torch.isfinite(flow).all()):
-        raise ValueError(
-            f"the tvl1 flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
-            f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
-        )
+        raise _diverged("tvl1", largest)
     flow = flow.to(v1.dtype)
     corr = correspondence_from_disparity(flow[:b, 1], flow[b:, 1], threshold=threshold)
     return dataclasses.replace(corr, vertical_12=flow[:b, 0], vertical_21=flow[b:, 0])
@@ -180,11 +185,7 @@ def _skimage_flow(
         return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)
 
     if not all(np.isfinite(f).all() for f in (*d12, *d21, *v12, *v21)):
-        largest = max(float(v1.abs().max()), float(v2.abs().max()))
-        raise ValueError(
-            f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
-            f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
-        )
+        raise _diverged(method, max(float(v1.abs().max()), float(v2.abs().max())))
 
     corr = correspondence_from_disparity(tensor(d12), tensor(d21), threshold=threshold)
     return dataclasses.replace(corr, vertical_12=tensor(v12), vertical_21=tensor(v21))

@@ -96,18 +96,11 @@ def pair_geometry(
     """
     opts = options or SynthesisOptions()
     seeds, steps = check_seeds(seeds, alpha)
-    fg = seed_foreground(seeds, masks, opts.background)
-    n_pairs = seeds.shape[0] - 1
     if opts.flow == "tvl1":  # batched: every pair (both directions) in one call
-        t0 = time.perf_counter()
-        batch = estimate_correspondence(
-            seeds[:-1], seeds[1:], method="tvl1", threshold=opts.threshold, **opts.flow_kwargs()
-        )
-        corrs = list(batch)
-        seconds = [(time.perf_counter() - t0) / n_pairs] * n_pairs
+        corrs, seconds = _batched_tvl1([seeds], opts)
     else:
         corrs, seconds = [], []
-        for n in range(n_pairs):
+        for n in range(len(steps)):
             t0 = time.perf_counter()
             kwargs = opts.flow_kwargs()
             if opts.flow == "rows":
@@ -122,14 +115,7 @@ def pair_geometry(
                 )
             )
             seconds.append(time.perf_counter() - t0)
-    out = []
-    for n, corr in enumerate(corrs):
-        t0 = time.perf_counter()
-        elevation = opts.elevation
-        if elevation == "auto":
-            elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
-        out.append(PairGeometry(corr, float(elevation), seconds[n] + time.perf_counter() - t0))
-    return out
+    return _with_elevations(seeds, masks, corrs, seconds, steps, opts)
 
 
 def object_geometries(
@@ -165,29 +151,49 @@ def object_geometries(
             f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
         )
     steps = pair_angles(alpha, checked[0].shape[0])
+    corrs, seconds = _batched_tvl1(checked, opts)
+    n = len(steps)
+    return [
+        _with_elevations(s, m, corrs[o * n : (o + 1) * n], seconds[o * n : (o + 1) * n], steps, opts)
+        for o, (s, m) in enumerate(zip(checked, per_mask, strict=True))
+    ]
+
+
+def _batched_tvl1(
+    objects: list[torch.Tensor], opts: SynthesisOptions
+) -> tuple[list[Correspondence], list[float]]:
+    """Every consecutive seed pair of every object (V, C, H, W), in order, from one TV-L1
+    call, and each pair's share of its seconds."""
     t0 = time.perf_counter()
     batch = estimate_correspondence(
-        torch.cat([s[:-1] for s in checked]),
-        torch.cat([s[1:] for s in checked]),
+        torch.cat([s[:-1] for s in objects]),
+        torch.cat([s[1:] for s in objects]),
         method="tvl1",
         threshold=opts.threshold,
         **opts.flow_kwargs(),
     )
     corrs = list(batch)
-    n_pairs = len(steps)
-    share = (time.perf_counter() - t0) / len(corrs)
+    return corrs, [(time.perf_counter() - t0) / len(corrs)] * len(corrs)
+
+
+def _with_elevations(
+    seeds: torch.Tensor,
+    masks: torch.Tensor | None,
+    corrs: list[Correspondence],
+    seconds: list[float],
+    steps: list[float],
+    opts: SynthesisOptions,
+) -> list[PairGeometry]:
+    """One object's records: each pair's correspondence with its elevation (measured for
+    ``"auto"``), its seconds those of its flow plus the elevation fit."""
+    fg = seed_foreground(seeds, masks, opts.background)
     out = []
-    for o, (s, m) in enumerate(zip(checked, per_mask, strict=True)):
-        fg = seed_foreground(s, m, opts.background)
-        geos = []
-        for n in range(n_pairs):
-            t1 = time.perf_counter()
-            corr = corrs[o * n_pairs + n]
-            elevation = opts.elevation
-            if elevation == "auto":
-                elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
-            geos.append(PairGeometry(corr, float(elevation), share + time.perf_counter() - t1))
-        out.append(geos)
+    for n, corr in enumerate(corrs):
+        t0 = time.perf_counter()
+        elevation = opts.elevation
+        if elevation == "auto":
+            elevation = _auto_elevation(corr, steps[n], fg[n : n + 1], opts.center, n)
+        out.append(PairGeometry(corr, float(elevation), seconds[n] + time.perf_counter() - t0))
     return out
 
 
@@ -216,6 +222,6 @@ def _auto_elevation(
         f"seed pair {pair}: elevation='auto' could not be measured ({why}); using elevation=0, "
         "the untilted camera (pass a number of degrees to choose another)",
         ElevationFallbackWarning,
-        stacklevel=3,
+        stacklevel=4,  # the caller of pair_geometry / object_geometries
     )
     return 0.0
