@@ -53,6 +53,7 @@ SUBPACKAGES = {
         "estimate_elevation",
         "fill_row_holes",
         "fundamental_from_tensor",
+        "guided_tvl1",
         "invert_row_map",
         "match_rows",
         "novel_view_tensor",

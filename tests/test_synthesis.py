@@ -58,7 +58,9 @@ def test_output_shape_and_record(plain: SynthesizedViews, seeds: torch.Tensor) -
 def test_warp_at_zero_is_identity(plain: SynthesizedViews, seeds: torch.Tensor) -> None:
     """At theta = 0, seed 0 is sampled at its own pixel grid; the output is seed 0 wherever
     seed 0 carries the whole weight, and synthesize_views is exactly that warp."""
-    corr = estimate_correspondence(seeds[:1], seeds[1:], method=PLAIN.flow, threshold=PLAIN.threshold)
+    corr = estimate_correspondence(
+        seeds[:1], seeds[1:], method=PLAIN.flow, threshold=PLAIN.threshold, alpha=ALPHA, **PLAIN.flow_kwargs()
+    )
     warp = NovelViewWarp(ALPHA, elevation=0.0)
     maps = warp.maps(corr, [0.0])
     h, w = seeds.shape[-2:]
@@ -233,7 +235,7 @@ def test_silhouette_aware_synthesis_has_no_dark_rim() -> None:
 
 def test_options_defaults() -> None:
     opts = SynthesisOptions()
-    assert (opts.flow, opts.elevation, opts.extent, opts.threshold) == ("tvl1", "auto", "auto", 1.0)
+    assert (opts.flow, opts.elevation, opts.extent, opts.threshold) == ("guided", "auto", "auto", 1.0)
     assert SynthesisOptions(flow="ilk", elevation=12.5).elevation == 12.5
 
 
@@ -242,7 +244,7 @@ def test_options_defaults() -> None:
     [
         (
             dict(flow="farneback"),
-            r"flow must be one of \('tvl1', 'tvl1-skimage', 'ilk', 'rows'\), got 'farneback'",
+            r"flow must be one of \('tvl1', 'tvl1-skimage', 'ilk', 'rows', 'guided'\), got 'farneback'",
         ),
         (dict(elevation="up"), "elevation must be a number of degrees or 'auto', got 'up'"),
         (dict(threshold=0.0), "threshold=0.0 must be positive"),

@@ -257,7 +257,8 @@ def test_estimate_errors() -> None:
     with pytest.raises(ValueError, match=r"view2 must be finite"):
         estimate_correspondence(view, bad)
     with pytest.raises(
-        ValueError, match=r"method must be one of \('tvl1', 'tvl1-skimage', 'ilk', 'rows'\), got 'farneback'"
+        ValueError,
+        match=r"method must be one of \('tvl1', 'tvl1-skimage', 'ilk', 'rows', 'guided'\), got 'farneback'",
     ):
         estimate_correspondence(view, view, method="farneback")
     with pytest.raises(TypeError, match=r"view1 must have a floating dtype, got torch.uint8"):

@@ -219,14 +219,15 @@ def _warp_rate(device: torch.device, n_objects: int, size: int, repeats: int = 3
 
 
 def _build(device: torch.device, n_objects: int, size: int) -> tuple[float, torch.Tensor]:
-    """The COIL-100-sized build end to end on ``device``: correspondence (the torch TV-L1,
-    every object's pair and both directions in one batch, on the device), synthesis and the
-    eigenspace (k = 15) of ``n_objects`` synthetic objects; (seconds, components)."""
+    """The COIL-100-sized build end to end on ``device``: correspondence (the default guided
+    flow: the row matcher and TV-L1, every object's pair and both directions in one batch,
+    on the device), synthesis and the eigenspace (k = 15) of ``n_objects`` synthetic
+    objects; (seconds, components)."""
     from torch_eigview.decomposition.eigenspace import Eigenspace
     from torch_eigview.synthesis import SynthesisOptions, object_geometries, synthesize_views
 
     seeds = [smooth_views(o, 6, 3, size)[[0, 5]].to(device) for o in range(n_objects)]
-    options = SynthesisOptions(flow="tvl1")
+    options = SynthesisOptions()
     t0 = _clock(device)
     geometry = object_geometries(seeds, 5.0, options)
     views = [

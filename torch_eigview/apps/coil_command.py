@@ -155,10 +155,17 @@ def add_synthesis_arguments(parser: argparse.ArgumentParser) -> None:
     """The novel-view synthesis options (``eigview coil`` and ``eigview fit``): see :func:`synthesis_options`."""
     parser.add_argument(
         "--flow",
-        choices=("tvl1", "tvl1-skimage", "ilk", "rows"),  # geometry.flow.METHODS, without importing torch
-        default="tvl1",
-        help="correspondences: TV-L1 optical flow in torch (tvl1, default) or scikit-image's "
-        "(tvl1-skimage, the reference), scikit-image's ILK flow, or semi-global matching along rows (rows)",
+        choices=(
+            "tvl1",
+            "tvl1-skimage",
+            "ilk",
+            "rows",
+            "guided",
+        ),  # geometry.flow.METHODS, without importing torch
+        default="guided",
+        help="correspondences: the row matcher's epipolar matches refined by TV-L1 (guided, default: "
+        "seeds far apart in angle), TV-L1 optical flow in torch (tvl1) or scikit-image's (tvl1-skimage, "
+        "the reference), scikit-image's ILK flow, or semi-global matching along rows (rows)",
     )
     parser.add_argument(
         "--elevation",

@@ -12,6 +12,8 @@
   and for the full circle, as the mean absolute intensity difference over the pixels
   both seeds see and over the rest of the foreground (real or synthesized), for the
   default options and for each stage ablated or swapped (:data:`ABLATIONS`);
+- ``correspondence``: each flow's seed-pair disparities against the motion chained
+  through the real views between the seeds (:mod:`torch_eigview.apps.diagnose_flow`);
 - ``pose``: where the full circle's pose error comes from (``--pose-seeds`` M, the
   ``eigview coil`` defaults otherwise): the mean and median error of the correctly
   recognized views, over all objects and without the nearly rotationally symmetric ones
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 import torch
 
 from torch_eigview.apps.circle import circle_layout
+from torch_eigview.apps.diagnose_flow import correspondence_table
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
@@ -57,6 +60,7 @@ __all__ = [
 ABLATIONS: dict[str, dict[str, object]] = {
     "default": {},
     "correspondence: ilk flow": {"flow": "ilk"},
+    "correspondence: tvl1 alone": {"flow": "tvl1"},
     "correspondence: tvl1 5x10 iterations": {"flow_options": {"num_warp": 5, "num_iter": 10}},
     "tilt: elevation 0": {"elevation": 0.0},
     "occlusion: max_stretch inf": {"max_stretch": float("inf")},
@@ -276,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m torch_eigview.apps.diagnose", description=__doc__.splitlines()[0]
     )
-    p.add_argument("tables", nargs="+", choices=("centers", "circle", "synthesis", "pose"))
+    p.add_argument("tables", nargs="+", choices=("centers", "circle", "synthesis", "pose", "correspondence"))
     p.add_argument("--root", required=True, help="COIL folder")
     p.add_argument("--objects", default=None, help="e.g. 1-20 (default: all)")
     p.add_argument("--centers", type=float, nargs="+", default=[0.0, 90.0, 180.0, 270.0])
@@ -293,6 +297,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="the pose table leaves out objects whose unit-norm views change less than this per pose step",
     )
     p.add_argument("--interpolate", action="store_true", help="the pose table scores --pose interpolate")
+    p.add_argument(
+        "--flow-alphas",
+        type=float,
+        nargs="+",
+        default=[10.0, 45.0],
+        help="seed angles of the correspondence table",
+    )
     args = p.parse_args(argv)
     folder = CoilFolder(args.root)
     objects = folder.objects if args.objects is None else parse_object_spec(args.objects)
@@ -301,6 +312,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(center_table(folder, objects, args.centers, args.alpha, args.components))
         elif table == "circle":
             print(circle_table(folder, objects, args.seeds, args.circle_components, args.step))
+        elif table == "correspondence":
+            print(correspondence_table(folder, objects, args.centers, args.flow_alphas))
         elif table == "pose":
             records, alpha = pose_records(folder, objects, args.pose_seeds, args.components, args.interpolate)
             print(pose_summary(records, alpha, symmetric_objects(folder, objects, args.symmetric_below)))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.flow import estimate_correspondence
+from torch_eigview.geometry.guided_flow import guided_tvl1
 from torch_eigview.geometry.pose import (
     AffineCoefficients,
     affine_coefficients,
@@ -35,6 +36,7 @@ __all__ = [
     "estimate_elevation",
     "fill_row_holes",
     "fundamental_from_tensor",
+    "guided_tvl1",
     "invert_row_map",
     "match_rows",
     "novel_view_tensor",

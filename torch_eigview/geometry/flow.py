@@ -1,5 +1,5 @@
 """Dense correspondences between two seed views: TV-L1 optical flow (in torch, or scikit-image's),
-scikit-image's ILK flow, or the row matcher.
+scikit-image's ILK flow, the row matcher, or the row matcher's matches refined by TV-L1.
 
 :func:`estimate_correspondence` estimates both directions (view 1 → 2 and 2 → 1) and
 keeps the horizontal disparity with a forward–backward validity mask
@@ -16,13 +16,14 @@ import torch
 
 from torch_eigview.check import check_finite, check_float_tensor, check_ndim, check_positive
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
+from torch_eigview.geometry.guided_flow import guided_tvl1
 from torch_eigview.geometry.row_matcher import match_rows
 from torch_eigview.geometry.tvl1 import max_magnitude, tvl1_flow
 
 __all__ = ["METHODS", "estimate_correspondence"]
 
 #: The correspondence methods of :func:`estimate_correspondence`.
-METHODS = ("tvl1", "tvl1-skimage", "ilk", "rows")
+METHODS = ("tvl1", "tvl1-skimage", "ilk", "rows", "guided")
 
 
 def _to_gray_numpy(view: torch.Tensor) -> np.ndarray:
@@ -51,10 +52,12 @@ def estimate_correspondence(
             every pair and both directions in one batch, on the views' device),
             ``"tvl1-skimage"`` (:func:`skimage.registration.optical_flow_tvl1`, the same
             algorithm pair by pair on the CPU: the reference), ``"ilk"``
-            (:func:`skimage.registration.optical_flow_ilk`) or ``"rows"`` (semi-global
+            (:func:`skimage.registration.optical_flow_ilk`), ``"rows"`` (semi-global
             matching along the turntable's epipolar lines in torch,
-            :func:`~torch_eigview.geometry.row_matcher.match_rows`, which needs ``alpha``
-            among ``flow_kwargs``).
+            :func:`~torch_eigview.geometry.row_matcher.match_rows`) or ``"guided"`` (the
+            row matcher's matches refined by TV-L1,
+            :func:`~torch_eigview.geometry.guided_flow.guided_tvl1`: views far apart in
+            angle); the last two need ``alpha`` among ``flow_kwargs``.
         threshold: forward–backward tolerance in pixels for the validity masks.
         **flow_kwargs: passed to the flow function (TV-L1's ``num_warp``, ``num_iter``, …).
 
@@ -76,6 +79,11 @@ def estimate_correspondence(
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     threshold = check_positive(threshold, "threshold")
+    if method in ("rows", "guided") and "alpha" not in flow_kwargs:
+        raise ValueError(
+            f"method={method!r} searches the epipolar lines of a rotation: pass alpha, the angle from "
+            f"view1 to view2 in degrees (estimate_correspondence(..., method={method!r}, alpha=10.0))"
+        )
     if v1.shape[-3] < 1:
         raise ValueError(f"view1 must have at least one channel, got shape {tuple(v1.shape)}")
     if v1.shape[-2] < 1 or v1.shape[-1] < 2:
@@ -93,6 +101,11 @@ def estimate_correspondence(
         return _one_row(v1, v2, method, threshold, flow_kwargs)
     if method == "rows":
         return match_rows(v1, v2, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
+    if method == "guided":
+        check_finite(v1, "view1")
+        check_finite(v2, "view2")
+        pair = (v1, v2) if v1.ndim == 4 else (v1[None], v2[None])
+        return guided_tvl1(*pair, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
     if method == "tvl1":
         return _torch_tvl1(v1, v2, threshold, flow_kwargs)
     return _skimage_flow(v1, v2, method, threshold, flow_kwargs)

@@ -20,11 +20,14 @@ class SynthesisOptions:
     """How seed views become novel views.
 
     Attributes:
-        flow: the correspondences: TV-L1 optical flow, ``"tvl1"`` (in torch, batched) or
-            ``"tvl1-skimage"`` (scikit-image's, the reference), scikit-image's ``"ilk"``, or
-            ``"rows"``, semi-global matching along the epipolar lines
-            (:func:`~torch_eigview.geometry.row_matcher.match_rows`, given each pair's
-            α and ``center``).
+        flow: the correspondences: ``"guided"`` (the default), the row matcher's matches
+            over the whole epipolar range refined by TV-L1
+            (:func:`~torch_eigview.geometry.guided_flow.guided_tvl1`), which follows the
+            large displacements of seeds far apart in angle; TV-L1 optical flow alone,
+            ``"tvl1"`` (in torch, batched) or ``"tvl1-skimage"`` (scikit-image's, the
+            reference); scikit-image's ``"ilk"``; or ``"rows"``, semi-global matching along
+            the epipolar lines alone (:func:`~torch_eigview.geometry.row_matcher.match_rows`).
+            ``"guided"`` and ``"rows"`` are given each pair's α and ``center``.
         threshold: forward–backward consistency tolerance in pixels.
         elevation: camera elevation in degrees (0: the paper's orthographic camera, rows
             stay rows), or ``"auto"`` to measure it per seed pair from the vertical flow; a
@@ -39,7 +42,9 @@ class SynthesisOptions:
         max_stretch: see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`.
         flow_options: keyword arguments for the flow function (TV-L1's ``num_warp``,
             ``num_iter``, ``tol``, ``prefilter``, …; the same names for the torch and the
-            scikit-image TV-L1). By default TV-L1 runs 3 warps of 5 iterations
+            scikit-image TV-L1; the guided flow takes TV-L1's and the row matcher's
+            ``depth``, ``elevation``, ``cost``, ``patch``, ``p1``, ``p2``). By default TV-L1
+            (alone or in the guided flow) runs 3 warps of 5 iterations
             (scikit-image's defaults are 5 and 10): 3x faster, and on COIL-20 as accurate
             (see the README).
         blend: how the two seeds of a pair share the pixels both see, ``"linear"`` or
@@ -52,7 +57,7 @@ class SynthesisOptions:
             object pixels darker than it count as background).
     """
 
-    flow: str = "tvl1"
+    flow: str = "guided"
     threshold: float = 1.0
     elevation: float | str = "auto"
     extent: bool | str = "auto"
@@ -67,7 +72,7 @@ class SynthesisOptions:
         """Keyword arguments for the flow function: ``flow_options``, else a fast preset."""
         if self.flow_options is not None:
             return dict(self.flow_options)
-        return dict(_FAST_TVL1) if self.flow in ("tvl1", "tvl1-skimage") else {}
+        return dict(_FAST_TVL1) if self.flow in ("tvl1", "tvl1-skimage", "guided") else {}
 
     def __post_init__(self) -> None:
         if self.flow not in FLOW_METHODS:

@@ -37,6 +37,11 @@ __all__ = [
 MAX_AUTO_ELEVATION = 89.0
 
 
+#: The flows that :func:`object_geometries` batches over objects: TV-L1 in one call, the
+#: row matcher and the guided flow in one call per angle between seeds.
+_BATCHED = ("tvl1", "rows", "guided")
+
+
 class ElevationFallbackWarning(UserWarning):
     """``elevation="auto"`` could not measure a seed pair's elevation and used 0."""
 
@@ -99,22 +104,7 @@ def pair_geometry(
     if opts.flow == "tvl1":  # batched: every pair (both directions) in one call
         corrs, seconds = _batched_tvl1([seeds], opts)
     else:
-        corrs, seconds = [], []
-        for n in range(len(steps)):
-            t0 = time.perf_counter()
-            kwargs = opts.flow_kwargs()
-            if opts.flow == "rows":
-                kwargs = {"alpha": steps[n], "center": opts.center, **kwargs}
-            corrs.append(
-                estimate_correspondence(
-                    seeds[n : n + 1],
-                    seeds[n + 1 : n + 2],
-                    method=opts.flow,
-                    threshold=opts.threshold,
-                    **kwargs,
-                )
-            )
-            seconds.append(time.perf_counter() - t0)
+        corrs, seconds = _by_angle([seeds], steps, opts)
     return _with_elevations(seeds, masks, corrs, seconds, steps, opts)
 
 
@@ -144,19 +134,49 @@ def object_geometries(
     per_mask = list(masks) if masks is not None else [None] * len(checked)
     if len(per_mask) != len(checked):
         raise ValueError(f"masks must hold one entry per object ({len(checked)}), got {len(per_mask)}")
-    if opts.flow != "tvl1" or len(checked) < 2:
+    if opts.flow not in _BATCHED or len(checked) < 2:
         return [pair_geometry(s, alpha, opts, m) for s, m in zip(checked, per_mask, strict=True)]
     if len({tuple(s.shape) for s in checked}) > 1:
         raise ValueError(
             f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
         )
     steps = pair_angles(alpha, checked[0].shape[0])
-    corrs, seconds = _batched_tvl1(checked, opts)
+    corrs, seconds = _batched_tvl1(checked, opts) if opts.flow == "tvl1" else _by_angle(checked, steps, opts)
     n = len(steps)
     return [
         _with_elevations(s, m, corrs[o * n : (o + 1) * n], seconds[o * n : (o + 1) * n], steps, opts)
         for o, (s, m) in enumerate(zip(checked, per_mask, strict=True))
     ]
+
+
+def _by_angle(
+    objects: list[torch.Tensor], steps: list[float], opts: SynthesisOptions
+) -> tuple[list[Correspondence], list[float]]:
+    """Every consecutive seed pair of every object (V, C, H, W), in order, one flow call per
+    distinct angle between the seeds (the row matcher and the guided flow search the
+    epipolar range of one α; the full circle has one α for all its pairs), and each pair's
+    share of its call's seconds."""
+    n = len(steps)
+    corrs: list[Correspondence | None] = [None] * (n * len(objects))
+    seconds = [0.0] * len(corrs)
+    for step in sorted(set(steps)):
+        pairs = [i for i in range(n) if steps[i] == step]
+        t0 = time.perf_counter()
+        kwargs = opts.flow_kwargs()
+        if opts.flow in ("rows", "guided"):
+            kwargs = {"alpha": step, "center": opts.center, **kwargs}
+        batch = estimate_correspondence(
+            torch.cat([s[pairs] for s in objects]),
+            torch.cat([s[[i + 1 for i in pairs]] for s in objects]),
+            method=opts.flow,
+            threshold=opts.threshold,
+            **kwargs,
+        )
+        share = (time.perf_counter() - t0) / len(batch)
+        at = [o * n + i for o in range(len(objects)) for i in pairs]
+        for j, corr in zip(at, batch, strict=True):
+            corrs[j], seconds[j] = corr, share
+    return [c for c in corrs if c is not None], seconds
 
 
 def _batched_tvl1(
