@@ -1,9 +1,9 @@
-"""Benchmark: one seed pair's correspondences, TV-L1 (torch, scikit-image) against the row matcher.
+"""Benchmark: one seed pair's correspondences: the guided flow, TV-L1 (torch, scikit-image), the row matcher.
 
 For each α, the COIL-20 objects' views at 0° and α are matched with
 :func:`~torch_eigview.synthesis.pair_geometry` (both directions, the validity masks and
 the elevation estimate: what ``eigview coil`` times as ``correspondence``), with
-``flow="tvl1"`` (torch), ``"tvl1-skimage"`` and ``"rows"``; the mean seconds per pair are printed as
+``flow="guided"`` (the default), ``"tvl1"`` (torch), ``"tvl1-skimage"`` and ``"rows"``; the mean seconds per pair are printed as
 JSON. This prints figures, it is not a timed test. Run it with one thread, and compare
 two checkouts by running it in each in turn:
 
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     seconds = {}
     for alpha in args.alpha:
         seeds = [folder.images(o, [0.0, alpha]) for o in folder.objects[: args.objects]]
-        for flow in ("tvl1", "tvl1-skimage", "rows"):
+        for flow in ("guided", "tvl1", "tvl1-skimage", "rows"):
             options = SynthesisOptions(flow=flow)
             pair_geometry(seeds[0], alpha, options)  # warm-up
             start = time.perf_counter()

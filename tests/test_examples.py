@@ -77,7 +77,7 @@ def test_train_frozen_features(coil_root: Path) -> None:
 def test_bench_correspondence(coil_root: Path) -> None:
     result = load("bench_correspondence").main(["--root", str(coil_root), "--objects", "1", "--alpha", "20"])
     seconds = result["seconds_per_pair"]
-    assert set(seconds) == {"tvl1 alpha=20", "tvl1-skimage alpha=20", "rows alpha=20"}
+    assert set(seconds) == {"guided alpha=20", "tvl1 alpha=20", "tvl1-skimage alpha=20", "rows alpha=20"}
     assert all(v > 0 for v in seconds.values())
 
 

@@ -369,5 +369,12 @@ def test_object_geometries_batch_equals_each_object() -> None:
             assert abs(a.elevation - b.elevation) < 1e-3
         views = synthesize_views(seeds, 5.0, [-2.0, 7.0], geometry=geos).views
         torch.testing.assert_close(views, synthesize_views(seeds, 5.0, [-2.0, 7.0]).views, atol=1e-3, rtol=0)
+    # TV-L1 batches objects of one seed shape only; the guided flow (the default) takes
+    # objects of other shapes one at a time.
     with pytest.raises(ValueError, match="objects must share one seed shape"):
-        object_geometries([objects[0], objects[1][:, :, :16]], 5.0)
+        object_geometries([objects[0], objects[1][:, :, :16]], 5.0, SynthesisOptions(flow="tvl1"))
+    mixed = object_geometries([objects[0], objects[1][:, :, :16]], 5.0)
+    torch.testing.assert_close(
+        mixed[1][0].correspondence.disparity_12,
+        pair_geometry(objects[1][:, :, :16], 5.0)[0].correspondence.disparity_12,
+    )

@@ -79,3 +79,19 @@ def test_export_opset_checked_before_reading_the_model(
 ) -> None:
     err = _err(["export", "--model", "missing.pt", "--out", "o.onnx", "--opset", opset], capsys)
     assert "--opset" in err and "missing.pt" not in err
+
+
+def test_flow_choices_are_the_flow_methods() -> None:
+    """The commands list the flows without importing torch; the list must stay
+    geometry.flow.METHODS, with the synthesis default as the default."""
+    import argparse
+
+    from torch_eigview.apps.coil_command import add_synthesis_arguments
+    from torch_eigview.geometry.flow import METHODS
+    from torch_eigview.synthesis import SynthesisOptions
+
+    parser = argparse.ArgumentParser()
+    add_synthesis_arguments(parser)
+    flow = next(a for a in parser._actions if a.dest == "flow")
+    assert flow.choices is not None and set(flow.choices) == set(METHODS)
+    assert flow.default == SynthesisOptions().flow

@@ -28,10 +28,7 @@ def test_chained_disparity_follows_the_exact_motion() -> None:
     direct = tvl1_flow(views[0, 0], views[-1, 0])[1]
     err_chained = (chained - exact.disparity_12[0])[inner].abs().median()
     err_direct = (direct - exact.disparity_12[0])[inner].abs().median()
-    assert float(err_chained) < 1.0 and float(err_chained) < 0.5 * float(err_direct), (
-        err_chained,
-        err_direct,
-    )
+    assert float(err_chained) < 1.0 and float(err_direct) > 1.5, (err_chained, err_direct)
     # One view: no motion.
     assert torch.equal(chained_disparity(views[:1]), torch.zeros(96, 96))
 
@@ -43,6 +40,7 @@ def test_table_on_coil(folder: CoilFolder) -> None:
     rows = {line.split()[1]: [float(v) for v in line.split()[2:]] for line in table.splitlines()[2:]}
     assert set(rows) == {"tvl1", "guided"}
     assert rows["guided"][0] > rows["tvl1"][0] + 0.2, rows
+    assert rows["guided"][1] < rows["tvl1"][1], rows  # the median error in pixels
     assert all(0.0 <= row[2] <= 1.0 for row in rows.values())
 
 
@@ -52,3 +50,8 @@ def test_table_rejects_angles_off_the_pose_grid(alpha: float) -> None:
         ValueError, match=rf"alpha={alpha:g} must be a positive multiple of the poses' step 5"
     ):
         correspondence_table(None, [1], [0.0], [alpha])  # type: ignore[arg-type]
+
+
+def test_table_needs_objects_centers_and_angles() -> None:
+    with pytest.raises(ValueError, match="objects, centers and alphas must each name at least one"):
+        correspondence_table(None, [], [0.0], [10.0])  # type: ignore[arg-type]

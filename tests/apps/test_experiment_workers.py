@@ -105,6 +105,7 @@ def test_worker_kind_follows_the_flow() -> None:
     from torch_eigview.apps.coil_command import _worker_kind
 
     for flow, kind in (
+        ("guided", "thread"),
         ("tvl1", "thread"),
         ("rows", "thread"),
         ("ilk", "process"),

@@ -16,7 +16,7 @@ from torch_eigview.datasets.shapes import SHAPES, make_object
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.guided_flow import MIN_SIDE, guided_tvl1
-from torch_eigview.synthesis import SynthesisOptions, object_geometries, pair_geometry
+from torch_eigview.synthesis import SynthesisOptions, object_geometries, pair_geometry, synthesize_views
 
 SIZE = 48
 FAST = {"num_warp": 3, "num_iter": 5}  # SynthesisOptions' TV-L1 preset
@@ -83,53 +83,137 @@ def test_batched_equals_pair_by_pair_dtype_device(device: torch.device) -> None:
     assert double.vertical_12 is not None and double.vertical_12.dtype == torch.float64
 
 
-def test_dispatch_and_geometry_batches() -> None:
+def test_dispatch_and_geometry_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     """estimate_correspondence and pair_geometry reach it with ``method="guided"`` (the
-    default); pairs and objects of one angle go through one call, equal to one at a time."""
+    default); pairs and objects of one angle go through one call per angle, each equal to
+    its pair alone, every object in order."""
+    import torch_eigview.synthesis.seed_pairs as seed_pairs
+
     views, _, _ = _pair("superquadric", 45.0)
-    via = estimate_correspondence(views[:1], views[1:], method="guided", alpha=45.0, **FAST)
-    torch.testing.assert_close(via.disparity_12, guided_tvl1(views[:1], views[1:], 45.0, **FAST).disparity_12)
+    via = estimate_correspondence(views[:1], views[1:], method="guided", alpha=45.0, elevation=0.0, **FAST)
+    torch.testing.assert_close(
+        via.disparity_12, guided_tvl1(views[:1], views[1:], 45.0, elevation=0.0, **FAST).disparity_12
+    )
     opts = SynthesisOptions(elevation=0.0)
     assert opts.flow == "guided"
     torch.testing.assert_close(
         pair_geometry(views, 45.0, opts)[0].correspondence.disparity_12, via.disparity_12
     )
-    # Three seeds 45° apart: both pairs in one call, and two objects in one call.
-    obj, cam = make_object("head"), OrthographicCamera(SIZE)
-    three = render_views(obj, [0.0, 45.0, 90.0], cam)
-    geo = pair_geometry(three, 45.0, opts)
-    for n in range(2):
-        alone = guided_tvl1(three[n : n + 1], three[n + 1 : n + 2], 45.0, **FAST)
-        torch.testing.assert_close(geo[n].correspondence.disparity_12, alone.disparity_12)
-    many = object_geometries([three, three.flip(-1)], 45.0, opts)
-    for n in range(2):
-        torch.testing.assert_close(many[0][n].correspondence.disparity_12, geo[n].correspondence.disparity_12)
+    # Seeds at 0, 20, 30, 50 (Sec. 4.1's per-pair angles 20, 10, 20): two calls, one per angle,
+    # for two objects at once.
+    cam = OrthographicCamera(SIZE)
+    poses = [0.0, 20.0, 30.0, 50.0]
+    objects = [render_views(make_object(name), poses, cam) for name in ("head", "egg")]
+    calls: list[int] = []
+    real = seed_pairs.estimate_correspondence
+
+    def counted(*args: object, **kwargs: object) -> Correspondence:
+        calls.append(len(args[0]))  # type: ignore[arg-type]
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(seed_pairs, "estimate_correspondence", counted)
+    many = object_geometries(objects, [20.0, 10.0, 20.0], opts)
+    assert sorted(calls) == [2, 4]  # the 10° pair of both objects, the two 20° pairs of both
+    for seeds, geo in zip(objects, many, strict=True):
+        for n, step in enumerate([20.0, 10.0, 20.0]):
+            alone = guided_tvl1(seeds[n : n + 1], seeds[n + 1 : n + 2], step, elevation=0.0, **FAST)
+            torch.testing.assert_close(
+                geo[n].correspondence.disparity_12, alone.disparity_12, atol=1e-4, rtol=0
+            )
 
 
 def test_small_views_are_tvl1_alone() -> None:
-    """Below the row matcher's smallest side there is no prior: TV-L1 alone."""
+    """Below the row matcher's smallest side there is no prior: TV-L1 alone, in float64 too."""
     gen = torch.Generator().manual_seed(0)
     v1, v2 = torch.rand(2, 1, 1, MIN_SIDE - 1, 5, generator=gen)
-    guided = guided_tvl1(v1, v2, 10.0, **FAST)
-    alone = estimate_correspondence(v1, v2, **FAST)
-    torch.testing.assert_close(guided.disparity_12, alone.disparity_12, atol=1e-5, rtol=0)
-    torch.testing.assert_close(guided.disparity_21, alone.disparity_21, atol=1e-5, rtol=0)
-    # One-pixel-high views go through estimate_correspondence's one-row path.
-    row = estimate_correspondence(v1[:, :, :1], v2[:, :, :1], method="guided", alpha=10.0)
-    assert row.shape == (1, 1, 5)
+    for dtype in (torch.float32, torch.float64):
+        guided = guided_tvl1(v1.to(dtype), v2.to(dtype), 10.0, **FAST)
+        alone = estimate_correspondence(v1.to(dtype), v2.to(dtype), **FAST)
+        assert guided.disparity_12.dtype == dtype
+        torch.testing.assert_close(guided.disparity_12, alone.disparity_12, atol=1e-5, rtol=0)
+        torch.testing.assert_close(guided.disparity_21, alone.disparity_21, atol=1e-5, rtol=0)
+    # One-pixel-high views go through estimate_correspondence's one-row path: TV-L1 along the row.
+    row = estimate_correspondence(v1[:, :, :1], v2[:, :, :1], method="guided", alpha=10.0, **FAST)
+    one = estimate_correspondence(v1[:, :, :1], v2[:, :, :1], **FAST)
+    torch.testing.assert_close(row.disparity_12, one.disparity_12, atol=1e-5, rtol=0)
+
+
+def test_empty_batch_3d_views_and_gradients() -> None:
+    views, _, _ = _pair("egg", 20.0)
+    empty = guided_tvl1(views[:0], views[:0], 20.0)
+    assert empty.shape == (0, SIZE, SIZE) and empty.valid_12.dtype == torch.bool
+    flat = guided_tvl1(views[0], views[1], 20.0, **FAST)  # (C, H, W) each
+    torch.testing.assert_close(
+        flat.disparity_12, guided_tvl1(views[:1], views[1:], 20.0, **FAST).disparity_12
+    )
+    # Views that require grad enter detached (the matches are not differentiable), and the
+    # synthesis with the default flow still differentiates through the warp.
+    seeds = views.clone().requires_grad_()
+    corr = guided_tvl1(seeds[:1], seeds[1:], 20.0, **FAST)
+    assert not corr.disparity_12.requires_grad
+    out = synthesize_views(seeds, 20.0, [5.0], SynthesisOptions(elevation=0.0, extent=False)).views
+    out.sum().backward()
+    assert seeds.grad is not None and float(seeds.grad.abs().sum()) > 0
+
+
+def test_large_views_take_the_prior_at_a_reduced_size(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A view larger than PRIOR_SIDE has its prior matched on a view reduced by a power of
+    two and scaled back; TV-L1 takes up the difference (here PRIOR_SIDE is lowered to 24 on
+    the 48-pixel views, a reduction by 2)."""
+    import torch_eigview.geometry.guided_flow as guided_flow
+
+    views, seen, exact = _pair("head", 45.0)
+    inner = _interior(seen)
+    full = guided_tvl1(views[:1], views[1:], 45.0, **FAST)
+    monkeypatch.setattr(guided_flow, "PRIOR_SIDE", 24)
+    reduced = guided_tvl1(views[:1], views[1:], 45.0, **FAST)
+    err_full, err_reduced = _median_error(full, exact, inner), _median_error(reduced, exact, inner)
+    assert err_reduced < 1.0 and err_reduced < 2 * err_full + 0.2, (err_reduced, err_full)
+    assert not torch.equal(full.disparity_12, reduced.disparity_12)
 
 
 @pytest.mark.parametrize(
     ("call", "error", "match"),
     [
-        (lambda v: guided_tvl1(v, v, 10.0, warps=3), ValueError, r"flow options \['warps'\] .* row matcher"),
+        (
+            lambda v: guided_tvl1(v, v, 10.0, warps=3),
+            ValueError,
+            r"options \['warps'\] are neither the row matcher's",
+        ),
         (lambda v: guided_tvl1(v, v, 0.0), ValueError, r"alpha"),
         (lambda v: guided_tvl1(v[..., :3, :3], v[..., :3, :3], 180.0), ValueError, r"alpha=180"),
         (lambda v: guided_tvl1(v, v, 10.0, num_warp=0), ValueError, r"num_warp"),
         (lambda v: guided_tvl1(v, v, 10.0, patch=4), ValueError, r"patch=4 must be odd"),
         (lambda v: estimate_correspondence(v, v, method="guided"), ValueError, r"pass alpha"),
+        (lambda v: guided_tvl1(v[..., :3, :3], v[..., :3, :3], 10.0, depth=-1.0), ValueError, r"depth=-1.0"),
+        (lambda v: guided_tvl1(v[..., :3, :3], v[..., :3, :3], 10.0, center="a"), TypeError, r"center"),
+        (lambda v: guided_tvl1(v[0, 0], v[0, 0], 10.0), ValueError, r"view1 must have shape \(C, H, W\)"),
+        (lambda v: guided_tvl1([v], v, 10.0), TypeError, r"view1"),
+        (lambda v: guided_tvl1(v, v[..., :6], 10.0), ValueError, r"view2 must have the shape of view1"),
+        (lambda v: guided_tvl1(v * float("nan"), v, 10.0), ValueError, r"view1"),
+        (lambda v: guided_tvl1(v * 1e30, v, 10.0), ValueError, r"magnitude"),
+        (
+            lambda v: SynthesisOptions(flow_options={"alpha": 99.0}),
+            ValueError,
+            r"flow_options must not hold \['alpha'\]",
+        ),
     ],
-    ids=["unknown-option", "alpha-0", "alpha-180-small", "tvl1-option", "row-option", "no-alpha"],
+    ids=[
+        "unknown-option",
+        "alpha-0",
+        "alpha-180-small",
+        "tvl1-option",
+        "row-option",
+        "no-alpha",
+        "row-option-small",
+        "center-small",
+        "2d",
+        "list",
+        "shapes",
+        "nan",
+        "huge",
+        "flow-options-alpha",
+    ],
 )
 def test_bad_arguments(call: object, error: type[Exception], match: str) -> None:
     view = torch.rand(1, 1, 8, 8, generator=torch.Generator().manual_seed(1))

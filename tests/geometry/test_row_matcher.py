@@ -114,8 +114,11 @@ def test_given_elevation_and_dispatch() -> None:
     assert float(err.median()) < 0.3
     via = estimate_correspondence(views[:1], views[1:], method="rows", alpha=alpha)
     torch.testing.assert_close(via.disparity_12, match_rows(views[:1], views[1:], alpha).disparity_12)
+    # A given elevation is the matcher's too.
     geo = pair_geometry(views, alpha, SynthesisOptions(flow="rows", elevation=0.0))
-    torch.testing.assert_close(geo[0].correspondence.disparity_12, via.disparity_12)
+    torch.testing.assert_close(geo[0].correspondence.disparity_12, level.disparity_12)
+    auto = pair_geometry(views, alpha, SynthesisOptions(flow="rows"))
+    torch.testing.assert_close(auto[0].correspondence.disparity_12, via.disparity_12)
 
 
 @pytest.mark.parametrize(
@@ -160,3 +163,15 @@ def test_same_result_every_run(folder: CoilFolder, obj: int) -> None:
         for field in dataclasses.fields(first):
             a, b = getattr(first, field.name), getattr(again, field.name)
             assert torch.equal(a, b), field.name
+
+
+def test_empty_batch_and_views_that_require_grad() -> None:
+    """B = 0 gives an empty correspondence; views that require grad enter detached (the
+    aggregation writes in place, the matches are not differentiable)."""
+    views, _ = _pair("egg", 10.0)
+    empty = match_rows(views[:0], views[:0], 10.0)
+    assert empty.shape == (0, SIZE, SIZE) and empty.valid_12.dtype == torch.bool
+    seeds = views.clone().requires_grad_()
+    corr = match_rows(seeds[:1], seeds[1:], 10.0)
+    torch.testing.assert_close(corr.disparity_12, match_rows(views[:1], views[1:], 10.0).disparity_12)
+    assert not corr.disparity_12.requires_grad

@@ -269,7 +269,9 @@ def report_cuda(c: dict[str, Any]) -> None:
     else:
         print(f"\n== cuda: {what} on {torch.cuda.get_device_name()}")
     print(f"  maps + warp: {c['views_per_s']:.0f} views/s")
-    print(f"  build end to end (TV-L1, synthesis and eigenspace on {c['device']}): {c['build_s']:.2f} s")
+    print(
+        f"  build end to end (the guided flow, synthesis and eigenspace on {c['device']}): {c['build_s']:.2f} s"
+    )
     if "angle_to_cpu_rad" in c:
         ok = c["objects"] == 100 and c["build_s"] < 3 and c["angle_to_cpu_rad"] < 1e-4
         print(

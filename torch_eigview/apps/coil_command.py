@@ -127,7 +127,7 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         "--device",
         choices=("cpu", "cuda"),
         default="cpu",
-        help="where the views, the flow (tvl1, rows; the scikit-image flows stay on the CPU), the warp, "
+        help="where the views, the flow (guided, tvl1, rows; the scikit-image flows stay on the CPU), the warp, "
         "the eigenspace and recognition run",
     )
     coil.add_argument(

@@ -61,7 +61,7 @@ ABLATIONS: dict[str, dict[str, object]] = {
     "default": {},
     "correspondence: ilk flow": {"flow": "ilk"},
     "correspondence: tvl1 alone": {"flow": "tvl1"},
-    "correspondence: tvl1 5x10 iterations": {"flow_options": {"num_warp": 5, "num_iter": 10}},
+    "correspondence: guided, TV-L1 5x10 iterations": {"flow_options": {"num_warp": 5, "num_iter": 10}},
     "tilt: elevation 0": {"elevation": 0.0},
     "occlusion: max_stretch inf": {"max_stretch": float("inf")},
     "size normalization: off": {"extent": False},

@@ -25,7 +25,8 @@ import torch
 import torch.nn.functional as F
 
 from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.synthesis import SynthesisOptions, pair_geometry
+from torch_eigview.geometry.flow import estimate_correspondence
+from torch_eigview.synthesis import SynthesisOptions
 from torch_eigview.warp.normalize import foreground_mask
 
 __all__ = ["FLOWS", "chained_disparity", "correspondence_table"]
@@ -41,8 +42,8 @@ def chained_disparity(views: torch.Tensor) -> torch.Tensor:
 
     gray = views.mean(dim=1).float()
     _, h, w = gray.shape
-    xs = torch.arange(w, dtype=gray.dtype).expand(h, w)
-    ys = torch.arange(h, dtype=gray.dtype)[:, None].expand(h, w)
+    xs = torch.arange(w, dtype=gray.dtype, device=gray.device).expand(h, w)
+    ys = torch.arange(h, dtype=gray.dtype, device=gray.device)[:, None].expand(h, w)
     px, py = xs.clone(), ys.clone()
     flows = tvl1_flow(gray[:-1], gray[1:])  # (V - 1, 2, H, W), rows first
     for flow in flows:
@@ -61,6 +62,11 @@ def correspondence_table(
     flows: Sequence[str] = FLOWS,
 ) -> str:
     """The table (see the module's docstring) for seed pairs at each center and α."""
+    if not objects or not centers or not alphas:
+        raise ValueError(
+            f"objects, centers and alphas must each name at least one, got {list(objects)}, "
+            f"{list(centers)}, {list(alphas)}"
+        )
     lines = [
         "seed-pair disparity against the motion chained through the real views between the seeds",
         f"{'alpha':>6} {'flow':>8} {'slope':>7} {'error px':>9} {'trusted':>8}",
@@ -77,8 +83,17 @@ def correspondence_table(
                 fg = foreground_mask(views[:1], SynthesisOptions().background)[0]
                 ref = reference[fg].double()
                 for flow in flows:
-                    opts = SynthesisOptions(flow=flow, elevation=0.0)
-                    corr = pair_geometry(views[[0, -1]], alpha, opts)[0].correspondence
+                    # The flow as the synthesis runs it (its options, the angle for the
+                    # epipolar flows), without the elevation fit.
+                    opts = SynthesisOptions(flow=flow)
+                    kwargs = (
+                        {"alpha": alpha, **opts.flow_kwargs()}
+                        if flow in ("rows", "guided")
+                        else opts.flow_kwargs()
+                    )
+                    corr = estimate_correspondence(
+                        views[:1], views[-1:], method=flow, threshold=opts.threshold, **kwargs
+                    )
                     d = corr.disparity_12[0][fg].double()
                     slope = float((d * ref).sum() / (ref * ref).sum().clamp_min(1e-12))
                     error = float((d - ref).abs().median())

@@ -277,7 +277,8 @@ def synthetic_gallery(
         alpha: angle between consecutive seed views, degrees.
         n_views: 2 or 3 seed views.
         synth: (start, stop, step) of the synthesized angles in degrees.
-        correspondences: ``"flow"`` (TV-L1 optical flow between the seed views),
+        correspondences: ``"flow"`` (the synthesis options' flow between the seed views, by
+            default the guided flow),
             ``"exact"`` (from the renderer's geometry) or ``"rendered"``: no synthesis, the
             *rendered* views at the same angles (the protocol's ceiling: what perfect
             synthesis would give).

@@ -18,7 +18,7 @@ from torch_eigview.check import check_finite, check_float_tensor, check_ndim, ch
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.guided_flow import guided_tvl1
 from torch_eigview.geometry.row_matcher import match_rows
-from torch_eigview.geometry.tvl1 import max_magnitude, tvl1_flow
+from torch_eigview.geometry.tvl1 import diverged, max_magnitude, tvl1_flow
 
 __all__ = ["METHODS", "estimate_correspondence"]
 
@@ -68,8 +68,9 @@ def estimate_correspondence(
     Raises:
         TypeError: a view is not a float tensor, or ``method`` not a str.
         ValueError: shapes that differ, are empty or narrower than 2 pixels, non-finite views,
-            an unknown ``method``, a ``threshold`` that is not a finite number > 0, or a
-            flow that diverges (views far outside image intensities).
+            an unknown ``method``, a ``threshold`` that is not a finite number > 0, ``"rows"``
+            or ``"guided"`` without ``alpha``, or a flow that diverges (views far outside
+            image intensities).
     """
     v1 = check_float_tensor(view1, "view1")
     v2 = check_float_tensor(view2, "view2")
@@ -102,21 +103,10 @@ def estimate_correspondence(
     if method == "rows":
         return match_rows(v1, v2, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
     if method == "guided":
-        check_finite(v1, "view1")
-        check_finite(v2, "view2")
-        pair = (v1, v2) if v1.ndim == 4 else (v1[None], v2[None])
-        return guided_tvl1(*pair, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
+        return guided_tvl1(v1, v2, threshold=threshold, **flow_kwargs)  # type: ignore[arg-type]
     if method == "tvl1":
         return _torch_tvl1(v1, v2, threshold, flow_kwargs)
     return _skimage_flow(v1, v2, method, threshold, flow_kwargs)
-
-
-def _diverged(method: str, largest: float) -> ValueError:
-    """The error of a flow that came back with NaN or infinite values."""
-    return ValueError(
-        f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
-        f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
-    )
 
 
 def _torch_tvl1(
@@ -142,7 +132,7 @@ def _torch_tvl1(
     with torch.no_grad():
         flow = tvl1_flow(torch.cat([g1, g2]), torch.cat([g2, g1]), **flow_kwargs)  # type: ignore[arg-type]
     if not bool(torch.isfinite(flow).all()):
-        raise _diverged("tvl1", largest)
+        raise diverged("tvl1", largest)
     flow = flow.to(v1.dtype)
     corr = correspondence_from_disparity(flow[:b, 1], flow[b:, 1], threshold=threshold)
     return dataclasses.replace(corr, vertical_12=flow[:b, 0], vertical_21=flow[b:, 0])
@@ -198,7 +188,7 @@ def _skimage_flow(
         return torch.as_tensor(np.stack(arrays), dtype=view1.dtype, device=view1.device)
 
     if not all(np.isfinite(f).all() for f in (*d12, *d21, *v12, *v21)):
-        raise _diverged(method, max(float(v1.abs().max()), float(v2.abs().max())))
+        raise diverged(method, max(float(v1.abs().max()), float(v2.abs().max())))
 
     corr = correspondence_from_disparity(tensor(d12), tensor(d21), threshold=threshold)
     return dataclasses.replace(corr, vertical_12=tensor(v12), vertical_21=tensor(v21))

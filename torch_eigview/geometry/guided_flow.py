@@ -27,22 +27,50 @@ import inspect
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.check import check_alpha
+from torch_eigview.check import check_finite, check_float_tensor, check_ndim
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
-from torch_eigview.geometry.row_matcher import match_rows
-from torch_eigview.geometry.tvl1 import tvl1_flow
+from torch_eigview.geometry.row_matcher import check_row_options, match_rows
+from torch_eigview.geometry.tvl1 import diverged, max_magnitude, tvl1_flow
 
-__all__ = ["MIN_SIDE", "ROW_OPTIONS", "TVL1_OPTIONS", "guided_tvl1"]
+__all__ = ["MIN_SIDE", "PRIOR_SIDE", "ROW_OPTIONS", "TVL1_OPTIONS", "guided_tvl1"]
 
 #: The smallest image side the row matcher takes (its line model is searched at quarter
 #: resolution); on smaller views, whose displacements are a pixel or two, the guided flow is
 #: TV-L1 alone.
 MIN_SIDE = 4
+#: The largest side the row matcher runs at: larger views are reduced by a power of two for
+#: the prior (a 512 × 512 pair at α = 45° would otherwise take about 10 GB and 30 s).
+PRIOR_SIDE = 128
 
 #: Keyword arguments of :func:`guided_tvl1` that go to the row matcher.
-ROW_OPTIONS = ("elevation", "depth", "cost", "patch", "p1", "p2")
+ROW_OPTIONS = tuple(
+    p
+    for p in inspect.signature(match_rows).parameters
+    if p not in ("view1", "view2", "alpha", "center", "threshold")
+)
 #: Keyword arguments of :func:`guided_tvl1` that go to TV-L1.
 TVL1_OPTIONS = tuple(p for p in inspect.signature(tvl1_flow).parameters if p not in ("reference", "moving"))
+
+
+def _check_views(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tensor]:
+    """The two views as finite float (B, C, H, W) tensors of one shape, within TV-L1's range."""
+    v1 = check_float_tensor(view1, "view1")
+    v2 = check_float_tensor(view2, "view2")
+    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
+    if v2.shape != v1.shape:
+        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
+    if v1.shape[-3] < 1 or v1.shape[-2] < 2 or v1.shape[-1] < 2:
+        raise ValueError(f"view1 must have a channel and at least 2 x 2 pixels, got shape {tuple(v1.shape)}")
+    check_finite(v1, "view1")
+    check_finite(v2, "view2")
+    largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
+    if largest > max_magnitude(torch.float32):
+        raise ValueError(
+            f"the guided flow cannot take views of magnitude {largest:.3g} (TV-L1's float32 squared "
+            f"gradients overflow beyond {max_magnitude(torch.float32):.3g}): they must be image "
+            f"intensities, e.g. in [0, 1]"
+        )
+    return (v1[None], v2[None]) if v1.ndim == 3 else (v1, v2)
 
 
 def _sample(fields: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor) -> torch.Tensor:
@@ -69,52 +97,77 @@ def guided_tvl1(
     """Correspondences of turntable views α apart: the row matcher's matches refined by TV-L1.
 
     Args:
-        view1: (B, C, H, W) first seed views (channels averaged to gray).
+        view1: (B, C, H, W) or (C, H, W) first seed views (channels averaged to gray).
         view2: same shape, the views turned by ``alpha``.
         alpha: angle from view 1 to view 2 in degrees.
         center: column of the rotation axis (the row matcher's), default ``(W - 1) / 2``.
         threshold: forward–backward tolerance in pixels for the validity masks.
-        **options: :data:`ROW_OPTIONS` for the row matcher (``depth``, ``elevation``, …)
-            and :data:`TVL1_OPTIONS` for TV-L1 (``num_warp``, ``num_iter``, …).
+        **options: :data:`ROW_OPTIONS` for the row matcher (``depth``, ``elevation``, …;
+            ``depth`` in pixels of the views) and :data:`TVL1_OPTIONS` for TV-L1
+            (``num_warp``, ``num_iter``, …).
 
     Returns:
         A :class:`Correspondence` (B, H, W) in the views' dtype and device, with the
-        composed vertical flow in ``vertical_12`` and ``vertical_21``.
+        composed vertical flow in ``vertical_12`` and ``vertical_21``; B = 0 gives an
+        empty one. Not differentiable: the views enter detached.
 
     Raises:
-        ValueError: an option neither the row matcher nor TV-L1 takes, or what either
-            raises for its own arguments.
+        TypeError: a view that is not a float tensor, or an option of the wrong type.
+        ValueError: views of other shapes than (B, C, H, W) / (C, H, W) or that differ,
+            non-finite views or values TV-L1 cannot take, an option neither the row
+            matcher nor TV-L1 takes, or a bad value of one (checked on views of any size).
     """
+    v1, v2 = _check_views(view1, view2)
     unknown = sorted(set(options) - set(ROW_OPTIONS) - set(TVL1_OPTIONS))
     if unknown:
         raise ValueError(
-            f"flow options {unknown} are not options of the guided flow: it takes the row matcher's "
-            f"{list(ROW_OPTIONS)} and TV-L1's {list(TVL1_OPTIONS)}"
+            f"options {unknown} are neither the row matcher's {list(ROW_OPTIONS)} nor TV-L1's "
+            f"{list(TVL1_OPTIONS)}"
         )
     row_kw = {k: v for k, v in options.items() if k in ROW_OPTIONS}
     tv_kw = {k: v for k, v in options.items() if k in TVL1_OPTIONS}
-    b, _, h, w = view1.shape
-    zeros = torch.zeros(2 * b, h, w, device=view1.device)
-    if min(h, w) >= MIN_SIDE:
-        prior = match_rows(view1, view2, alpha, center=center, threshold=threshold, **row_kw)  # type: ignore[arg-type]
-        px = torch.cat([prior.disparity_12, prior.disparity_21]).float()
-        py = zeros
-        if prior.vertical_12 is not None and prior.vertical_21 is not None:
-            py = torch.cat([prior.vertical_12, prior.vertical_21]).float()
-    else:  # too small for the row matcher's line model: no prior, TV-L1 alone
-        check_alpha(alpha)
-        px = py = zeros
+    check_row_options(alpha, center, threshold=threshold, **row_kw)
+    b, _, h, w = v1.shape
+    if b == 0:
+        empty = v1.new_empty(0, h, w)
+        return Correspondence(empty, empty, empty.bool(), empty.bool(), empty, empty)
+    # The row matcher's cost volume grows with the pixels times the labels (W/2 · |sin α|
+    # each way): on large views it runs on views reduced by a power of two to at most
+    # PRIOR_SIDE, and its matches are scaled back; TV-L1's pyramid, deeper on large views,
+    # takes up the prior's coarser steps.
+    f = 1
+    while max(h, w) > PRIOR_SIDE * f:
+        f *= 2
     with torch.no_grad():
-        gray = torch.cat([view1, view2]).detach().mean(dim=1, keepdim=True).float()
+        v1, v2 = v1.detach(), v2.detach()
+        zeros = torch.zeros(2 * b, h, w, dtype=torch.float32, device=v1.device)
+        px, py = zeros, zeros
+        if min(h, w) >= MIN_SIDE * f:
+            small1, small2 = (F.avg_pool2d(v, f) if f > 1 else v for v in (v1, v2))
+            c = (w - 1) / 2 if center is None else float(center)
+            if row_kw.get("depth") is not None:
+                row_kw["depth"] = float(row_kw["depth"]) / f  # type: ignore[arg-type]
+            shifted = (c - (f - 1) / 2) / f
+            prior = match_rows(small1, small2, alpha, center=shifted, threshold=threshold, **row_kw)  # type: ignore[arg-type]
+            px = torch.cat([prior.disparity_12, prior.disparity_21]).float()
+            if prior.vertical_12 is not None and prior.vertical_21 is not None:
+                py = torch.cat([prior.vertical_12, prior.vertical_21]).float()
+            if f > 1:
+                up = F.interpolate(
+                    torch.stack([px, py], dim=1), size=(h, w), mode="bilinear", align_corners=False
+                )
+                px, py = up[:, 0] * f, up[:, 1] * f
+        # Below MIN_SIDE (times the reduction) the row matcher's line model has too few
+        # pixels: no prior, TV-L1 alone (such views move by a pixel or two).
+        gray = torch.cat([v1, v2]).mean(dim=1, keepdim=True).float()
         # Each view's partner warped onto its grid by the prior: view 2 onto view 1, and back.
         other = torch.cat([gray[b:], gray[:b]])
         warped = _sample(other, px, py)[:, 0]
         residual = tvl1_flow(gray[:, 0], warped, **tv_kw)  # type: ignore[arg-type]  # (2B, 2, H, W)
         ry, rx = residual[:, 0], residual[:, 1]
         moved = _sample(torch.stack([px, py], dim=1), rx, ry)
-        dx, dy = (rx + moved[:, 0]), (ry + moved[:, 1])
-        dx, dy = dx.to(view1.dtype), dy.to(view1.dtype)
+        dx, dy = (rx + moved[:, 0]).to(v1.dtype), (ry + moved[:, 1]).to(v1.dtype)
     if not bool(torch.isfinite(dx).all() & torch.isfinite(dy).all()):
-        raise ValueError("the guided flow between view1 and view2 diverged (NaN or infinite flow)")
+        raise diverged("guided", max(float(v1.abs().max()), float(v2.abs().max())))
     corr = correspondence_from_disparity(dx[:b], dx[b:], threshold=threshold)
     return dataclasses.replace(corr, vertical_12=dy[:b], vertical_21=dy[b:])

@@ -48,7 +48,7 @@ from torch_eigview.check import (
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.sgm import aggregate, winner
 
-__all__ = ["COSTS", "match_rows"]
+__all__ = ["COSTS", "check_row_options", "match_rows"]
 
 COSTS = ("adgrad", "zncc")
 
@@ -309,7 +309,40 @@ def match_rows(
         ((1, 24, 32), True)
     """
     v1, v2 = _check_views(view1, view2)
-    alpha = check_alpha(alpha)
+    alpha, cost, patch, tilt = check_row_options(
+        alpha, center, elevation, depth, cost, patch, p1, p2, threshold
+    )
+    b, _, h, w = v1.shape
+    c = (w - 1) / 2 if center is None else float(center)
+    if b == 0:
+        empty = v1.new_empty(0, h, w)
+        return Correspondence(empty, empty, empty.bool(), empty.bool(), empty, empty)
+    reach = w / 2 if depth is None else float(depth)
+    # Float32 throughout: the costs need no more, and it is what a GPU runs fast. The
+    # matches are not differentiable (the aggregation writes in place): the views enter detached.
+    with torch.no_grad():
+        gray = torch.cat([v1, v2]).detach().mean(dim=1).float()
+        return _match(gray, b, alpha, c, reach, tilt, cost, patch, p1, p2, threshold, v1.dtype)
+
+
+def check_row_options(
+    alpha: object,
+    center: object = None,
+    elevation: object = "auto",
+    depth: object = None,
+    cost: object = "adgrad",
+    patch: object = 5,
+    p1: object = 0.01,
+    p2: object = 0.1,
+    threshold: object = 1.0,
+) -> tuple[float, str, int, float | None]:
+    """Validates :func:`match_rows`'s arguments other than the views.
+
+    Returns:
+        ``(alpha, cost, patch, tilt)``: the checked angle, cost and patch, and the sine of
+        a given elevation (None for ``"auto"``).
+    """
+    alpha = check_alpha(alpha)  # type: ignore[arg-type]
     cost = check_choice(cost, "cost", COSTS)
     patch = check_int(patch, "patch", minimum=1)
     if patch % 2 == 0:
@@ -317,12 +350,27 @@ def match_rows(
     for name, value in (("p1", p1), ("p2", p2), ("threshold", threshold), ("depth", depth or 1.0)):
         if not check_number(value, name) > 0:
             raise ValueError(f"{name}={value} must be positive")
-    b, _, h, w = v1.shape
-    c = (w - 1) / 2 if center is None else check_number(center, "center")
-    reach = w / 2 if depth is None else float(depth)
-    tilt = _tilt(elevation)
-    # Float32 throughout: the costs need no more, and it is what a GPU runs fast.
-    gray = torch.cat([v1, v2]).mean(dim=1).float()
+    if center is not None:
+        check_number(center, "center")
+    return alpha, cost, patch, _tilt(elevation)
+
+
+def _match(
+    gray: torch.Tensor,
+    b: int,
+    alpha: float,
+    c: float,
+    reach: float,
+    tilt: float | None,
+    cost: str,
+    patch: int,
+    p1: float,
+    p2: float,
+    threshold: float,
+    dtype: torch.dtype,
+) -> Correspondence:
+    """:func:`match_rows` on the (2B, H, W) float32 grayscale views, view 1's then view 2's."""
+    h, w = gray.shape[-2:]
     feats = _features(gray, "adgrad")
     ref = feats if cost == "adgrad" else _features(gray, cost)
     rad = math.radians(alpha)
@@ -332,6 +380,6 @@ def match_rows(
     grid = _epipolar_grid(n_labels, h, w, angles, model, c)
     volume = _cost_volume(ref, torch.cat([ref[b:], ref[:b]]), grid, cost, patch)
     disparity, vertical = _matches(winner(aggregate(volume, p1, p2)), model, angles, c)
-    disparity, vertical = disparity.to(v1.dtype), vertical.to(v1.dtype)
+    disparity, vertical = disparity.to(dtype), vertical.to(dtype)
     corr = correspondence_from_disparity(disparity[:b], disparity[b:], threshold=threshold)
     return dataclasses.replace(corr, vertical_12=vertical[:b], vertical_21=vertical[b:])

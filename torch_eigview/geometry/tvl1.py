@@ -33,7 +33,7 @@ import torch.nn.functional as F
 
 from torch_eigview.check import check_finite, check_float_tensor, check_int, check_ndim, check_positive
 
-__all__ = ["max_magnitude", "tvl1_flow"]
+__all__ = ["diverged", "max_magnitude", "tvl1_flow"]
 
 # scikit-image's pyramid: halve until the smaller side is at most 2 · 16, at most 10 levels.
 _DOWNSCALE, _MIN_SIZE, _MAX_LEVELS = 2, 16, 10
@@ -211,6 +211,15 @@ def _level(
         if not bool(active.any()):
             break
     return flow
+
+
+def diverged(method: str, largest: float) -> ValueError:
+    """The error of a flow (this one or another) that came back with NaN or infinite values,
+    ``largest`` the views' largest magnitude."""
+    return ValueError(
+        f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
+        f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
+    )
 
 
 def max_magnitude(dtype: torch.dtype) -> float:

@@ -77,6 +77,17 @@ class SynthesisOptions:
     def __post_init__(self) -> None:
         if self.flow not in FLOW_METHODS:
             raise ValueError(f"flow must be one of {FLOW_METHODS}, got {self.flow!r}")
+        if self.flow_options is not None:
+            if not isinstance(self.flow_options, dict):
+                raise TypeError(
+                    f"flow_options must be a dict or None, got {type(self.flow_options).__name__}"
+                )
+            taken = sorted({"alpha", "center", "threshold"} & set(self.flow_options))
+            if taken:
+                raise ValueError(
+                    f"flow_options must not hold {taken}: each seed pair's angle, SynthesisOptions.center "
+                    f"and SynthesisOptions.threshold are passed to the flow"
+                )
         if isinstance(self.elevation, str):
             if self.elevation != "auto":
                 raise ValueError(f"elevation must be a number of degrees or 'auto', got {self.elevation!r}")

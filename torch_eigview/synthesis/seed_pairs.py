@@ -115,7 +115,9 @@ def object_geometries(
     masks: Sequence[torch.Tensor | None] | None = None,
 ) -> list[list[PairGeometry]]:
     """:func:`pair_geometry` of many objects; with ``flow="tvl1"`` every seed pair of every
-    object (both directions) is one batched flow call, on the seeds' device.
+    object (both directions) is one batched flow call, on the seeds' device, and with
+    ``"guided"`` or ``"rows"`` one call per distinct angle between seeds (objects of other
+    seed shapes: one object at a time).
 
     Args:
         objects: per object its (V, C, H, W) seed views, the same shape for all.
@@ -134,9 +136,10 @@ def object_geometries(
     per_mask = list(masks) if masks is not None else [None] * len(checked)
     if len(per_mask) != len(checked):
         raise ValueError(f"masks must hold one entry per object ({len(checked)}), got {len(per_mask)}")
-    if opts.flow not in _BATCHED or len(checked) < 2:
+    shapes = {tuple(s.shape) for s in checked}
+    if opts.flow not in _BATCHED or len(checked) < 2 or (len(shapes) > 1 and opts.flow != "tvl1"):
         return [pair_geometry(s, alpha, opts, m) for s, m in zip(checked, per_mask, strict=True)]
-    if len({tuple(s.shape) for s in checked}) > 1:
+    if len(shapes) > 1:
         raise ValueError(
             f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
         )
@@ -157,14 +160,17 @@ def _by_angle(
     epipolar range of one α; the full circle has one α for all its pairs), and each pair's
     share of its call's seconds."""
     n = len(steps)
-    corrs: list[Correspondence | None] = [None] * (n * len(objects))
-    seconds = [0.0] * len(corrs)
+    corrs: list[Correspondence] = []
+    seconds: list[float] = []
+    slots: dict[int, tuple[Correspondence, float]] = {}
     for step in sorted(set(steps)):
         pairs = [i for i in range(n) if steps[i] == step]
         t0 = time.perf_counter()
         kwargs = opts.flow_kwargs()
         if opts.flow in ("rows", "guided"):
-            kwargs = {"alpha": step, "center": opts.center, **kwargs}
+            # A given elevation is the row matcher's too (it searches its own otherwise).
+            given = {} if opts.elevation == "auto" else {"elevation": opts.elevation}
+            kwargs = {**given, **kwargs, "alpha": step, "center": opts.center}
         batch = estimate_correspondence(
             torch.cat([s[pairs] for s in objects]),
             torch.cat([s[[i + 1 for i in pairs]] for s in objects]),
@@ -175,8 +181,11 @@ def _by_angle(
         share = (time.perf_counter() - t0) / len(batch)
         at = [o * n + i for o in range(len(objects)) for i in pairs]
         for j, corr in zip(at, batch, strict=True):
-            corrs[j], seconds[j] = corr, share
-    return [c for c in corrs if c is not None], seconds
+            slots[j] = (corr, share)
+    for j in range(n * len(objects)):  # every slot is filled: each pair has one angle
+        corrs.append(slots[j][0])
+        seconds.append(slots[j][1])
+    return corrs, seconds
 
 
 def _batched_tvl1(
