@@ -30,6 +30,7 @@ __all__ = [
     "check_number",
     "check_positive",
     "check_view_input",
+    "check_view_pair",
     "limit",
 ]
 
@@ -58,6 +59,19 @@ def check_finite(x: torch.Tensor, name: str) -> None:
     if x.numel() and not bool(torch.isfinite(x).all()):
         n_bad = int((~torch.isfinite(x)).sum())
         raise ValueError(f"{name} must be finite, got {n_bad} NaN or infinite value(s)")
+
+
+def check_view_pair(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tensor]:
+    """Two views of one pair: float tensors (C, H, W) or (B, C, H, W) of one shape, finite;
+    returned batched, (B, C, H, W) each."""
+    v1 = check_float_tensor(view1, "view1")
+    v2 = check_float_tensor(view2, "view2")
+    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
+    if v2.shape != v1.shape:
+        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
+    check_finite(v1, "view1")
+    check_finite(v2, "view2")
+    return (v1[None], v2[None]) if v1.ndim == 3 else (v1, v2)
 
 
 def check_number(value: object, name: str) -> float:

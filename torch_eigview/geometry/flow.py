@@ -18,7 +18,7 @@ from torch_eigview.check import check_finite, check_float_tensor, check_ndim, ch
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.guided_flow import guided_tvl1
 from torch_eigview.geometry.row_matcher import match_rows
-from torch_eigview.geometry.tvl1 import diverged, max_magnitude, tvl1_flow
+from torch_eigview.geometry.tvl1 import check_range, diverged, tvl1_flow
 
 __all__ = ["METHODS", "estimate_correspondence"]
 
@@ -118,13 +118,8 @@ def _torch_tvl1(
     if v1.ndim == 3:
         v1, v2 = v1[None], v2[None]
     b = v1.shape[0]
+    check_range(v1, v2, "tvl1")
     largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
-    if largest > max_magnitude(torch.float32):
-        raise ValueError(
-            f"the tvl1 flow between view1 and view2 cannot take values of magnitude {largest:.3g} (float32's "
-            f"squared gradients overflow beyond {max_magnitude(torch.float32):.3g}): the views must be image "
-            f"intensities, e.g. in [0, 1]"
-        )
     # Grayscale as the reference path makes it (float64 mean, then scikit-image's float32),
     # where the device has float64 (not MPS).
     wide = torch.float64 if v1.device.type in ("cpu", "cuda") else torch.float32

@@ -27,10 +27,10 @@ import inspect
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.check import check_finite, check_float_tensor, check_ndim
+from torch_eigview.check import check_view_pair
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.row_matcher import check_row_options, match_rows
-from torch_eigview.geometry.tvl1 import diverged, max_magnitude, tvl1_flow
+from torch_eigview.geometry.tvl1 import check_range, diverged, tvl1_flow
 
 __all__ = ["MIN_SIDE", "PRIOR_SIDE", "ROW_OPTIONS", "TVL1_OPTIONS", "guided_tvl1"]
 
@@ -54,23 +54,11 @@ TVL1_OPTIONS = tuple(p for p in inspect.signature(tvl1_flow).parameters if p not
 
 def _check_views(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tensor]:
     """The two views as finite float (B, C, H, W) tensors of one shape, within TV-L1's range."""
-    v1 = check_float_tensor(view1, "view1")
-    v2 = check_float_tensor(view2, "view2")
-    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
-    if v2.shape != v1.shape:
-        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
+    v1, v2 = check_view_pair(view1, view2)
     if v1.shape[-3] < 1 or v1.shape[-2] < 2 or v1.shape[-1] < 2:
         raise ValueError(f"view1 must have a channel and at least 2 x 2 pixels, got shape {tuple(v1.shape)}")
-    check_finite(v1, "view1")
-    check_finite(v2, "view2")
-    largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
-    if largest > max_magnitude(torch.float32):
-        raise ValueError(
-            f"the guided flow cannot take views of magnitude {largest:.3g} (TV-L1's float32 squared "
-            f"gradients overflow beyond {max_magnitude(torch.float32):.3g}): they must be image "
-            f"intensities, e.g. in [0, 1]"
-        )
-    return (v1[None], v2[None]) if v1.ndim == 3 else (v1, v2)
+    check_range(v1, v2, "guided")
+    return v1, v2
 
 
 def _sample(fields: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor) -> torch.Tensor:

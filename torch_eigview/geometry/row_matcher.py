@@ -36,15 +36,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.check import (
-    check_alpha,
-    check_choice,
-    check_finite,
-    check_float_tensor,
-    check_int,
-    check_ndim,
-    check_number,
-)
+from torch_eigview.check import check_alpha, check_choice, check_int, check_number, check_view_pair
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.sgm import aggregate, winner
 
@@ -227,19 +219,13 @@ def _line_model(
 
 def _check_views(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tensor]:
     """The two views as finite float (B, C, H, W) tensors of one shape."""
-    v1 = check_float_tensor(view1, "view1")
-    v2 = check_float_tensor(view2, "view2")
-    check_ndim(v1, "view1", (3, 4), "(C, H, W) or (B, C, H, W)")
-    if v2.shape != v1.shape:
-        raise ValueError(f"view2 must have the shape of view1 {tuple(v1.shape)}, got {tuple(v2.shape)}")
-    check_finite(v1, "view1")
-    check_finite(v2, "view2")
+    v1, v2 = check_view_pair(view1, view2)
     if min(v1.shape[-2:]) < 4:
         raise ValueError(
             f"view1 must be at least 4x4 pixels (the line model is searched at quarter resolution), "
             f"got H={v1.shape[-2]}, W={v1.shape[-1]}"
         )
-    return (v1[None], v2[None]) if v1.ndim == 3 else (v1, v2)
+    return v1, v2
 
 
 def _tilt(elevation: object) -> float | None:

@@ -33,7 +33,7 @@ import torch.nn.functional as F
 
 from torch_eigview.check import check_finite, check_float_tensor, check_int, check_ndim, check_positive
 
-__all__ = ["diverged", "max_magnitude", "tvl1_flow"]
+__all__ = ["check_range", "diverged", "max_magnitude", "tvl1_flow"]
 
 # scikit-image's pyramid: halve until the smaller side is at most 2 · 16, at most 10 levels.
 _DOWNSCALE, _MIN_SIZE, _MAX_LEVELS = 2, 16, 10
@@ -220,6 +220,17 @@ def diverged(method: str, largest: float) -> ValueError:
         f"the {method} flow between view1 and view2 diverged (NaN or infinite flow): the views' values "
         f"(largest magnitude {largest:.3g}) must be image intensities, e.g. in [0, 1]"
     )
+
+
+def check_range(v1: torch.Tensor, v2: torch.Tensor, method: str) -> None:
+    """Raises the error of views whose values TV-L1's float32 squared gradients cannot take."""
+    largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
+    if largest > max_magnitude(torch.float32):
+        raise ValueError(
+            f"the {method} flow between view1 and view2 cannot take values of magnitude {largest:.3g} (float32's "
+            f"squared gradients overflow beyond {max_magnitude(torch.float32):.3g}): the views must be image "
+            f"intensities, e.g. in [0, 1]"
+        )
 
 
 def max_magnitude(dtype: torch.dtype) -> float:
