@@ -42,6 +42,7 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
     padded = torch.full((n, n_labels + 2, x), float("inf"), dtype=c.dtype, device=c.device)
     prev = padded[:, 1:-1]
     low = torch.empty_like(prev[:, :1])
+    jump = torch.empty_like(low)
     step = torch.empty_like(prev)
     prev.copy_(c[:, :, order[0]])
     acc[:, :, order[0]] += prev
@@ -50,7 +51,7 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
         torch.minimum(padded[:, 2:], padded[:, :-2], out=step)
         step.add_(p1)
         torch.minimum(step, prev, out=step)
-        torch.minimum(step, low + p2, out=step)
+        torch.minimum(step, torch.add(low, p2, out=jump), out=step)
         torch.add(c[:, :, t], step, out=prev)
         prev.sub_(low)
         acc[:, :, t] += prev
@@ -59,8 +60,7 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
 def winner(volume: torch.Tensor) -> torch.Tensor:
     """(N, H, W) sub-pixel label (centred: 0 is the middle label) of least cost."""
     n_labels = volume.shape[1]
-    k = volume.argmin(dim=1, keepdim=True)
-    c0 = volume.gather(1, k)
+    c0, k = volume.min(dim=1, keepdim=True)  # the first least cost, as argmin (faster over dim 1)
     cm = volume.gather(1, (k - 1).clamp(min=0))
     cp = volume.gather(1, (k + 1).clamp(max=n_labels - 1))
     curv = cm - 2 * c0 + cp
