@@ -22,7 +22,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
-import torch.nn.functional as F
 
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.geometry.flow import estimate_correspondence
@@ -38,19 +37,13 @@ FLOWS = ("tvl1", "rows", "guided")
 def chained_disparity(views: torch.Tensor) -> torch.Tensor:
     """(H, W) horizontal motion from the first of ``views`` (V, C, H, W) to the last, TV-L1
     between consecutive views composed along the way (bilinear, border padding)."""
-    from torch_eigview.geometry.tvl1 import tvl1_flow
+    from torch_eigview.geometry.tvl1 import tvl1_flow, warp_by_flow
 
     gray = views.mean(dim=1).float()
-    _, h, w = gray.shape
-    xs = torch.arange(w, dtype=gray.dtype, device=gray.device).expand(h, w)
-    ys = torch.arange(h, dtype=gray.dtype, device=gray.device)[:, None].expand(h, w)
-    px, py = xs.clone(), ys.clone()
-    flows = tvl1_flow(gray[:-1], gray[1:])  # (V - 1, 2, H, W), rows first
-    for flow in flows:
-        grid = torch.stack([px * (2 / max(w - 1, 1)) - 1, py * (2 / max(h - 1, 1)) - 1], dim=-1)[None]
-        at = F.grid_sample(flow[None], grid, mode="bilinear", padding_mode="border", align_corners=True)[0]
-        px, py = px + at[1], py + at[0]
-    return px - xs
+    total = gray.new_zeros(1, 2, *gray.shape[-2:])  # rows first, as a flow
+    for flow in tvl1_flow(gray[:-1], gray[1:]):  # (V - 1, 2, H, W)
+        total = total + warp_by_flow(flow[None], total)
+    return total[0, 1]
 
 
 def correspondence_table(

@@ -40,7 +40,7 @@ from torch_eigview.check import check_alpha, check_choice, check_int, check_numb
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.sgm import aggregate, winner
 
-__all__ = ["COSTS", "check_row_options", "match_rows"]
+__all__ = ["COSTS", "check_row_options", "epipolar_matches", "match_rows"]
 
 COSTS = ("adgrad", "zncc")
 
@@ -308,7 +308,10 @@ def match_rows(
     # matches are not differentiable (the aggregation writes in place): the views enter detached.
     with torch.no_grad():
         gray = torch.cat([v1, v2]).detach().mean(dim=1).float()
-        return _match(gray, b, alpha, c, reach, tilt, cost, patch, p1, p2, threshold, v1.dtype)
+        disparity, vertical = epipolar_matches(gray, alpha, c, reach, tilt, cost, patch, p1, p2)
+    disparity, vertical = disparity.to(v1.dtype), vertical.to(v1.dtype)
+    corr = correspondence_from_disparity(disparity[:b], disparity[b:], threshold=threshold)
+    return dataclasses.replace(corr, vertical_12=vertical[:b], vertical_21=vertical[b:])
 
 
 def check_row_options(
@@ -341,9 +344,8 @@ def check_row_options(
     return alpha, cost, patch, _tilt(elevation)
 
 
-def _match(
+def epipolar_matches(
     gray: torch.Tensor,
-    b: int,
     alpha: float,
     c: float,
     reach: float,
@@ -352,10 +354,19 @@ def _match(
     patch: int,
     p1: float,
     p2: float,
-    threshold: float,
-    dtype: torch.dtype,
-) -> Correspondence:
-    """:func:`match_rows` on the (2B, H, W) float32 grayscale views, view 1's then view 2's."""
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`match_rows`'s matches before the left–right check, for trusted arguments
+    (:func:`check_row_options`'s; ``c`` the axis column, ``reach`` the largest ``|Z|``).
+
+    Args:
+        gray: (2B, H, W) float32 grayscale views, the B first views then the B second ones,
+            at least 4 × 4.
+
+    Returns:
+        ``(disparity, vertical)``, each (2B, H, W) float32: view 1's pixels towards view 2,
+        then view 2's towards view 1.
+    """
+    b = gray.shape[0] // 2
     h, w = gray.shape[-2:]
     feats = _features(gray, "adgrad")
     ref = feats if cost == "adgrad" else _features(gray, cost)
@@ -365,7 +376,4 @@ def _match(
     n_labels = 2 * math.ceil(reach * abs(math.sin(rad))) + 1
     grid = _epipolar_grid(n_labels, h, w, angles, model, c)
     volume = _cost_volume(ref, torch.cat([ref[b:], ref[:b]]), grid, cost, patch)
-    disparity, vertical = _matches(winner(aggregate(volume, p1, p2)), model, angles, c)
-    disparity, vertical = disparity.to(dtype), vertical.to(dtype)
-    corr = correspondence_from_disparity(disparity[:b], disparity[b:], threshold=threshold)
-    return dataclasses.replace(corr, vertical_12=vertical[:b], vertical_21=vertical[b:])
+    return _matches(winner(aggregate(volume, p1, p2)), model, angles, c)

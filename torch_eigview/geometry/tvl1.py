@@ -33,7 +33,7 @@ import torch.nn.functional as F
 
 from torch_eigview.check import check_finite, check_float_tensor, check_int, check_ndim, check_positive
 
-__all__ = ["check_range", "diverged", "max_magnitude", "tvl1_flow"]
+__all__ = ["check_range", "diverged", "max_magnitude", "tvl1_flow", "warp_by_flow"]
 
 # scikit-image's pyramid: halve until the smaller side is at most 2 · 16, at most 10 levels.
 _DOWNSCALE, _MIN_SIZE, _MAX_LEVELS = 2, 16, 10
@@ -113,16 +113,16 @@ def _upsample_flow(flow: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
     return out * scale.view(1, 2, 1, 1)
 
 
-def _warp(moving: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
-    """``moving`` (N, H, W) sampled bilinearly at (r + v, c + u), edge values outside."""
-    h, w = moving.shape[-2:]
+def warp_by_flow(fields: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
+    """(N, F, H, W) ``fields`` sampled bilinearly at (r + v, c + u) of a (N, 2, H, W) flow
+    (rows first, as :func:`tvl1_flow` returns it), edge values outside."""
+    h, w = fields.shape[-2:]
     rows = torch.arange(h, dtype=flow.dtype, device=flow.device).view(h, 1)
     cols = torch.arange(w, dtype=flow.dtype, device=flow.device)
     gx = (flow[:, 1] + cols) * (2.0 / max(w - 1, 1)) - 1
     gy = (flow[:, 0] + rows) * (2.0 / max(h - 1, 1)) - 1
     grid = torch.stack([gx, gy], dim=-1)
-    out = F.grid_sample(moving[:, None], grid, mode="bilinear", padding_mode="border", align_corners=True)
-    return out[:, 0]
+    return F.grid_sample(fields, grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
 def _median3(flow: torch.Tensor) -> torch.Tensor:
@@ -175,7 +175,7 @@ def _level(
     for _ in range(num_warp):
         if prefilter:
             flow = _median3(flow)
-        warped = _warp(moving, flow)
+        warped = warp_by_flow(moving[:, None], flow)[:, 0]
         grad = _gradient(warped)
         ni = torch.addcmul(grad[:, 0] * grad[:, 0], grad[:, 1], grad[:, 1])
         ni = torch.where(ni == 0, 1.0, ni)
