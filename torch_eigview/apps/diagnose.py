@@ -14,6 +14,9 @@
   default options and for each stage ablated or swapped (:data:`ABLATIONS`);
 - ``correspondence``: each flow's seed-pair disparities against the motion chained
   through the real views between the seeds (:mod:`torch_eigview.apps.diagnose_flow`);
+- ``views``: the synthesized views as a sequence against the real views between the
+  seeds: how much nearer than the seeds they come, the pull of a real view's nearest
+  synthesized angle towards the seeds, and jumps (:mod:`torch_eigview.apps.diagnose_views`);
 - ``pose``: where the full circle's pose error comes from (``--pose-seeds`` M, the
   ``eigview coil`` defaults otherwise): the mean and median error of the correctly
   recognized views, over all objects and without the nearly rotationally symmetric ones
@@ -37,6 +40,7 @@ import torch
 
 from torch_eigview.apps.circle import circle_layout
 from torch_eigview.apps.diagnose_flow import correspondence_table
+from torch_eigview.apps.diagnose_views import view_gain_table
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
@@ -46,6 +50,7 @@ from torch_eigview.warp.novel_view import NovelViewWarp
 
 __all__ = [
     "ABLATIONS",
+    "TABLES",
     "PoseRecord",
     "center_table",
     "circle_table",
@@ -55,6 +60,9 @@ __all__ = [
     "symmetric_objects",
     "synthesis_error",
 ]
+
+#: The tables :func:`main` prints.
+TABLES = ("centers", "circle", "synthesis", "pose", "correspondence", "views")
 
 # Each stage of the synthesis swapped for an alternative (or switched off), one at a time.
 ABLATIONS: dict[str, dict[str, object]] = {
@@ -280,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m torch_eigview.apps.diagnose", description=__doc__.splitlines()[0]
     )
-    p.add_argument("tables", nargs="+", choices=("centers", "circle", "synthesis", "pose", "correspondence"))
+    p.add_argument("tables", nargs="+", choices=TABLES)
     p.add_argument("--root", required=True, help="COIL folder")
     p.add_argument("--objects", default=None, help="e.g. 1-20 (default: all)")
     p.add_argument("--centers", type=float, nargs="+", default=[0.0, 90.0, 180.0, 270.0])
@@ -304,6 +312,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=[10.0, 45.0],
         help="seed angles of the correspondence table",
     )
+    p.add_argument(
+        "--view-alphas",
+        type=float,
+        nargs="+",
+        default=[10.0, 20.0, 45.0],
+        help="seed angles of the views table",
+    )
     args = p.parse_args(argv)
     folder = CoilFolder(args.root)
     objects = folder.objects if args.objects is None else parse_object_spec(args.objects)
@@ -314,6 +329,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(circle_table(folder, objects, args.seeds, args.circle_components, args.step))
         elif table == "correspondence":
             print(correspondence_table(folder, objects, args.centers, args.flow_alphas))
+        elif table == "views":
+            print(view_gain_table(folder, objects, args.centers, args.view_alphas))
         elif table == "pose":
             records, alpha = pose_records(folder, objects, args.pose_seeds, args.components, args.interpolate)
             print(pose_summary(records, alpha, symmetric_objects(folder, objects, args.symmetric_below)))

@@ -1,0 +1,140 @@
+"""Synthesized views as a sequence: how much nearer the real views they come than the seeds
+do, which synthesized angle each real view is nearest to, and where the sequence jumps.
+
+A seed pair α apart synthesizes the views at every degree from 0 to α (``eigview coil``'s
+1° step); the real views between the seeds (COIL-20: every 5°, the seeds left out) are
+compared with them as the recognizer compares views, unit-norm and by Euclidean
+distance, in the full image space (no eigenspace, so what it shows is the synthesis's,
+not the projection's). Per α, over every object, center and real view between the seeds:
+
+- ``d seed``: the distance of the real view to the nearer seed, the mean;
+- ``d synth``: its distance to the view synthesized at its own angle, the mean;
+- ``gain``: ``1 − d synth / d seed``, the median: 1 for a perfect synthesis, 0 for views
+  no nearer the real one than the seed already is, negative for worse;
+- ``|shift|``: how far (degrees) the nearest synthesized view's angle lies from the real
+  view's, the median: a pose estimate's error in a gallery of these views;
+- ``pull``: how many degrees that nearest angle lies nearer to the nearer seed than the
+  real view's own, the median (positive: pulled towards the seed; the midway view, with
+  no nearer seed, left out; ``-`` where that is the only one);
+- ``jump``: the largest step between consecutive synthesized views over the median step,
+  the median over pairs: near 1 for a sequence that changes smoothly with the angle.
+
+``python -m torch_eigview.apps.diagnose views --root DIR [--view-alphas 10 20 45]``
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import statistics
+from collections.abc import Mapping, Sequence
+
+import torch
+
+from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+
+__all__ = ["VARIANTS", "pair_view_stats", "view_gain_table"]
+
+#: The options each table row synthesizes with: the defaults, and the size normalization
+#: switched off (a jump that vanishes with it comes from the normalization's box).
+VARIANTS: dict[str, dict[str, object]] = {
+    "default": {},
+    "size normalization: off": {"extent": False},
+}
+
+
+def _unit(views: torch.Tensor) -> torch.Tensor:
+    """(V, D) float64 rows of unit norm from (V, C, H, W) views."""
+    flat = views.flatten(1).double()
+    return flat / flat.norm(dim=1, keepdim=True).clamp_min(1e-12)
+
+
+def pair_view_stats(
+    seeds: torch.Tensor, real: torch.Tensor, alpha: float, step: float, options: SynthesisOptions
+) -> tuple[list[tuple[float, float, float, float | None]], float]:
+    """The figures of one seed pair.
+
+    Args:
+        seeds: (2, C, H, W) seed views at 0 and ``alpha``.
+        real: (R, C, H, W) real views at ``step``, 2·``step``, …, R·``step`` from the first seed.
+        alpha: angle between the seeds, degrees (a whole number).
+        step: the real views' pose step, degrees.
+        options: the synthesis's options.
+
+    Returns:
+        Per real view ``(d seed, d synth, shift, pull)`` (pull None midway between the
+        seeds), and the pair's ``jump``.
+    """
+    n_synth = round(alpha) + 1
+    thetas = torch.arange(n_synth, dtype=torch.float64)
+    synth = _unit(synthesize_views(seeds, alpha, thetas, options).views)
+    seed = _unit(seeds)
+    views = _unit(real)
+    distance = torch.cdist(views, synth)  # (R, T)
+    to_seed = torch.cdist(views, seed).amin(dim=1)
+    nearest = distance.argmin(dim=1).double()
+    rows: list[tuple[float, float, float, float | None]] = []
+    for i in range(views.shape[0]):
+        angle = (i + 1) * step
+        own = distance[i, round(angle)]
+        shift = float(nearest[i]) - angle
+        pull: float | None = None
+        if abs(2 * angle - alpha) > 1e-9:
+            near = 0.0 if 2 * angle < alpha else alpha
+            pull = abs(angle - near) - abs(float(nearest[i]) - near)
+        rows.append((float(to_seed[i]), float(own), shift, pull))
+    steps = (synth[1:] - synth[:-1]).norm(dim=1)
+    jump = float(steps.max() / steps.median().clamp_min(1e-12))
+    return rows, jump
+
+
+def view_gain_table(
+    folder: CoilFolder,
+    objects: Sequence[int],
+    centers: Sequence[float],
+    alphas: Sequence[float],
+    step: float = 5.0,
+    variants: Mapping[str, Mapping[str, object]] = VARIANTS,
+) -> str:
+    """The table (see the module's docstring) for seed pairs at each center and α."""
+    if not objects or not centers or not alphas or not variants:
+        raise ValueError(
+            f"objects, centers, alphas and variants must each name at least one, got {list(objects)}, "
+            f"{list(centers)}, {list(alphas)}, {list(variants)}"
+        )
+    for alpha in alphas:
+        n_steps = round(alpha / step)
+        if n_steps < 2 or abs(n_steps * step - alpha) > 1e-6:
+            raise ValueError(
+                f"alpha={alpha:g} must be a multiple of the poses' step {step:g}, at least two steps "
+                "(a real view between the seeds)"
+            )
+    lines = [
+        "real views between two seeds against the views synthesized at every degree (unit norm)",
+        f"{'alpha':>5} {'options':>24} {'views':>5} {'d seed':>7} {'d synth':>7} {'gain':>6} "
+        f"{'|shift|':>7} {'pull':>6} {'jump':>5}",
+    ]
+    for alpha in alphas:
+        n_steps = round(alpha / step)
+        for name, change in variants.items():
+            opts = dataclasses.replace(SynthesisOptions(), **change)  # type: ignore[arg-type]
+            rows: list[tuple[float, float, float, float | None]] = []
+            jumps = []
+            for obj in objects:
+                for c in centers:
+                    seeds = folder.images(obj, [c, c + alpha])
+                    real = folder.images(obj, [c + i * step for i in range(1, n_steps)])
+                    pair_rows, jump = pair_view_stats(seeds, real, alpha, step, opts)
+                    rows += pair_rows
+                    jumps.append(jump)
+            pulls = [r[3] for r in rows if r[3] is not None]
+            pull = f"{statistics.median(pulls):+6.1f}" if pulls else f"{'-':>6}"
+            lines.append(
+                f"{alpha:5g} {name[:24]:>24} {len(rows):5d} "
+                f"{statistics.mean(r[0] for r in rows):7.3f} {statistics.mean(r[1] for r in rows):7.3f} "
+                f"{statistics.median(1 - r[1] / max(r[0], 1e-12) for r in rows):+6.2f} "
+                f"{statistics.median(abs(r[2]) for r in rows):7.1f} "
+                f"{pull} "
+                f"{statistics.median(jumps):5.2f}"
+            )
+    return "\n".join(lines)
