@@ -52,6 +52,35 @@ def test_threads_report_gives_verdicts(capsys: pytest.CaptureFixture[str]) -> No
     assert "> 60" in out  # the timed-out run
     assert "policy / best (quiet): 1.18 (target <= 1.3: met)" in out
     assert "policy loaded / quiet: 1.20 (target <= 1.5: met)" in out
+    assert "floor" not in out  # no reference rows: no floor line
+
+
+def test_threads_report_reads_the_policy_against_the_reference(capsys: pytest.CaptureFixture[str]) -> None:
+    rows = [{"setting": "policy (default)", "quiet_s": 5.0, "loaded_s": 9.0, "loaded_over_quiet": 1.8}]
+    refs = [
+        {"setting": "reference: 1 thread", "quiet_s": 2.0, "loaded_s": 3.2, "loaded_over_quiet": 1.6},
+        {"setting": "reference: 2 threads", "quiet_s": 1.0, "loaded_s": 2.4, "loaded_over_quiet": 2.4},
+    ]
+    report_threads(
+        {"command": "coil", "neighbour_procs": 2, "timeout_s": 60.0, "rows": rows, "references": refs}
+    )
+    out = capsys.readouterr().out
+    assert "reference: 2 threads" in out and "policy loaded / quiet: 1.80 (target <= 1.5: NOT met)" in out
+    assert "loaded / quiet: 1.60 (1 thread), 2.40 (2 threads)" in out
+
+
+def test_reference_job_runs_quiet_and_loaded() -> None:
+    """The reference job really runs (a short one), quiet and beside one spinning process."""
+    refs = bench_speed._reference_rows(1, timeout_s=60.0, iters=5)
+    assert [r["setting"] for r in refs] == ["reference: 1 thread", "reference: 2 threads"]
+    for r in refs:
+        assert r["quiet_s"] > 0 and r["loaded_s"] > 0
+        assert r["loaded_over_quiet"] == pytest.approx(r["loaded_s"] / r["quiet_s"])
+
+
+def test_a_failing_python_run_names_itself() -> None:
+    with pytest.raises(RuntimeError, match=r"(?s)reference: 1 thread failed \(1\): .*ZeroDivisionError"):
+        bench_speed._run_python(["-c", "1 / 0"], timeout_s=60, name="reference: 1 thread")
 
 
 @pytest.mark.slow

@@ -5,8 +5,9 @@ recognition; the maps and the warp measured apart on each object's first seed pa
 ``threads``: the same ``eigview coil`` run as a subprocess with the default policy, one
 thread and two threads, on the machine as it is ("quiet") and beside a CPU-bound
 neighbour the benchmark starts itself (one spinning process per CPU, each ending by
-itself after a bounded time and killed after the measurement); every run is bounded by
-a timeout. ``cuda``: views synthesized per second and the COIL-100-sized build end to
+itself after a bounded time and killed after the measurement), and beside them a
+reference job of plain matrix products on one and two threads, whose slow-down is what
+the scheduler leaves any CPU-bound job; every run is bounded by a timeout. ``cuda``: views synthesized per second and the COIL-100-sized build end to
 end on the GPU; without one it says "not measured: no GPU" and runs the same code on the
 CPU at a small size, so that the one command is known to work.
 
@@ -107,11 +108,16 @@ def cpu_neighbour(n_procs: int, limit_s: float) -> Iterator[list[subprocess.Pope
 
 def _run_command(args: list[str], timeout_s: float) -> float | None:
     """Wall seconds of ``python -m torch_eigview ARGS`` (None when it ran past ``timeout_s``)."""
+    return _run_python(["-m", "torch_eigview", *args], timeout_s, f"eigview {' '.join(args)}")
+
+
+def _run_python(argv: list[str], timeout_s: float, name: str) -> float | None:
+    """Wall seconds of ``python ARGV`` (None when it ran past ``timeout_s``); ``name`` in its error."""
     env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
     t0 = time.perf_counter()
     try:
         done = subprocess.run(
-            [sys.executable, "-m", "torch_eigview", *args],
+            [sys.executable, *argv],
             timeout=timeout_s,
             env=env,
             stdout=subprocess.DEVNULL,
@@ -121,10 +127,31 @@ def _run_command(args: list[str], timeout_s: float) -> float | None:
     except subprocess.TimeoutExpired:
         return None
     if done.returncode:
-        raise RuntimeError(
-            f"eigview {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()[-500:]}"
-        )
+        raise RuntimeError(f"{name} failed ({done.returncode}): {done.stderr.strip()[-500:]}")
     return time.perf_counter() - t0
+
+
+# A fixed amount of CPU-bound work (matrix products) on N torch threads: the reference of
+# what the CPU scheduler leaves any job beside the neighbour, whatever its thread policy.
+_REFERENCE = (
+    "import torch\ntorch.set_num_threads({threads})\n"
+    "a = torch.randn(512, 512, generator=torch.Generator().manual_seed(0))\n"
+    "for _ in range({iters}):\n    a = (a @ a).div_(a.norm())\n"
+)
+
+
+def _reference_rows(n_procs: int, timeout_s: float, iters: int) -> list[dict[str, Any]]:
+    """The reference job on one and on two threads, quiet then beside the neighbour."""
+    rows = []
+    for n_threads in (1, 2):
+        argv = ["-c", _REFERENCE.format(threads=n_threads, iters=iters)]
+        name = f"reference: {n_threads} thread{'s' if n_threads > 1 else ''}"
+        quiet = _run_python(argv, timeout_s, name)
+        with cpu_neighbour(n_procs, timeout_s + 5):
+            loaded = _run_python(argv, timeout_s, name)
+        ratio = None if quiet is None or loaded is None else loaded / quiet
+        rows.append({"setting": name, "quiet_s": quiet, "loaded_s": loaded, "loaded_over_quiet": ratio})
+    return rows
 
 
 def _command(root: str | None, objects: str) -> list[str]:
@@ -135,16 +162,25 @@ def _command(root: str | None, objects: str) -> list[str]:
 
 
 def bench_threads(
-    root: str | None, objects: str = "1-4", timeout_s: float = 120.0, neighbour_procs: int | None = None
+    root: str | None,
+    objects: str = "1-4",
+    timeout_s: float = 120.0,
+    neighbour_procs: int | None = None,
+    reference_iters: int = 400,
 ) -> dict[str, Any]:
     """The thread policy against one and two threads, quiet and beside a CPU-bound neighbour.
 
     Each setting runs the same command as a subprocess (``OMP_NUM_THREADS`` unset, so
-    only ``--threads`` decides); quiet and loaded runs are interleaved per setting.
+    only ``--threads`` decides); quiet and loaded runs are interleaved per setting. A
+    reference job, ``reference_iters`` products of 512 × 512 matrices on one and on two
+    torch threads, runs the same way: its loaded/quiet ratio is what the CPU scheduler
+    allows any CPU-bound job beside this neighbour (with the neighbour on every CPU, about
+    1.5 for one busy thread and 2 for two), the floor the command's ratio is read against.
 
     Returns:
-        ``{"command", "rows": [{setting, quiet_s, loaded_s, loaded_over_quiet}], ...}``;
-        a time is None where the run passed ``timeout_s``.
+        ``{"command", "rows": [{setting, quiet_s, loaded_s, loaded_over_quiet}],
+        "references": [the same for the reference job], ...}``; a time is None where
+        the run passed ``timeout_s``.
     """
     from torch_eigview.scale.parallel import available_cpus
 
@@ -165,7 +201,13 @@ def bench_threads(
             loaded = _run_command([*base, *extra], timeout_s)
         ratio = None if quiet is None or loaded is None else loaded / quiet
         rows.append({"setting": name, "quiet_s": quiet, "loaded_s": loaded, "loaded_over_quiet": ratio})
-    return {"command": " ".join(base), "neighbour_procs": n_procs, "timeout_s": timeout_s, "rows": rows}
+    return {
+        "command": " ".join(base),
+        "neighbour_procs": n_procs,
+        "timeout_s": timeout_s,
+        "rows": rows,
+        "references": _reference_rows(n_procs, timeout_s, reference_iters),
+    }
 
 
 def report_threads(t: dict[str, Any]) -> None:
@@ -179,7 +221,7 @@ def report_threads(t: dict[str, Any]) -> None:
     def fmt(v: float | None, spec: str) -> str:
         return f"> {t['timeout_s']:.0f}" if v is None else format(v, spec)
 
-    for r in t["rows"]:
+    for r in [*t["rows"], *t.get("references", [])]:
         print(
             f"  {r['setting']:<26} {fmt(r['quiet_s'], '9.2f'):>9} {fmt(r['loaded_s'], '9.2f'):>9} "
             f"{fmt(r['loaded_over_quiet'], '13.2f'):>13}"
@@ -195,6 +237,12 @@ def report_threads(t: dict[str, Any]) -> None:
     ratio = policy["loaded_over_quiet"]
     if ratio is not None:
         print(f"  policy loaded / quiet: {ratio:.2f} (target <= 1.5: {'met' if ratio <= 1.5 else 'NOT met'})")
+    floor = {r["setting"]: r["loaded_over_quiet"] for r in t.get("references", [])}
+    if floor and all(v is not None for v in floor.values()):
+        print(
+            "  the scheduler's floor beside this neighbour, the reference job's loaded / quiet: "
+            + ", ".join(f"{v:.2f} ({k.removeprefix('reference: ')})" for k, v in floor.items())
+        )
 
 
 # ---------------------------------------------------------------------------- cuda
@@ -296,7 +344,9 @@ def run_sections(sections: Sequence[str], results: dict[str, Any], root: str | N
                 print(f"  {key:<15} {sec.get(key, float('nan')):8.3f} s")
             print(f"  of the synthesis, first seed pair: maps {s['maps_s']:.3f} s, warp {s['warp_s']:.3f} s")
     if "threads" in sections:
-        t = results["threads"] = bench_threads(root, "1-2" if quick else "1-4", 60.0 if quick else 180.0)
+        t = results["threads"] = bench_threads(
+            root, "1-2" if quick else "1-4", 60.0 if quick else 180.0, reference_iters=100 if quick else 400
+        )
         report_threads(t)
     if "cuda" in sections:
         c = results["cuda"] = bench_cuda(quick)
