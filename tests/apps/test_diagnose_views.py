@@ -103,6 +103,12 @@ def test_table_rejects_angles_without_a_view_between_seeds(alpha: float) -> None
         view_gain_table(None, [1], [0.0], [alpha])  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("step", [2.5, 0.0, -5.0])
+def test_table_rejects_a_step_that_is_not_whole_degrees(step: float) -> None:
+    with pytest.raises(ValueError, match=rf"step={step:g} must be a positive whole number of degrees"):
+        view_gain_table(None, [1], [0.0], [10.0], step=step)  # type: ignore[arg-type]
+
+
 def test_table_needs_objects_centers_angles_and_variants() -> None:
     with pytest.raises(ValueError, match="must each name at least one"):
         view_gain_table(None, [1], [0.0], [10.0], variants={})  # type: ignore[arg-type]

@@ -102,6 +102,10 @@ def view_gain_table(
             f"objects, centers, alphas and variants must each name at least one, got {list(objects)}, "
             f"{list(centers)}, {list(alphas)}, {list(variants)}"
         )
+    if step <= 0 or abs(step - round(step)) > 1e-9:
+        raise ValueError(
+            f"step={step:g} must be a positive whole number of degrees (the views are synthesized every degree)"
+        )
     for alpha in alphas:
         n_steps = round(alpha / step)
         if n_steps < 2 or abs(n_steps * step - alpha) > 1e-6:
