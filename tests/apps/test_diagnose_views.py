@@ -121,3 +121,17 @@ def test_cli_lists_the_views_table(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "--view-alphas" in capsys.readouterr().out
+
+
+def test_cli_bad_angle_is_one_line(capsys: pytest.CaptureFixture[str], coil_root) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(SystemExit) as exc:
+        main(["views", "--root", str(coil_root), "--objects", "1", "--view-alphas", "7"])
+    assert exc.value.code == 2
+    assert "alpha=7 must be a multiple of the poses' step 5" in capsys.readouterr().err
+
+
+def test_cli_missing_folder_is_one_line(capsys: pytest.CaptureFixture[str], tmp_path) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(SystemExit) as exc:
+        main(["views", "--root", str(tmp_path / "absent")])
+    assert exc.value.code == 2
+    assert "absent" in capsys.readouterr().err

@@ -320,23 +320,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="seed angles of the views table",
     )
     args = p.parse_args(argv)
-    folder = CoilFolder(args.root)
-    objects = folder.objects if args.objects is None else parse_object_spec(args.objects)
-    for table in args.tables:
-        if table == "centers":
-            print(center_table(folder, objects, args.centers, args.alpha, args.components))
-        elif table == "circle":
-            print(circle_table(folder, objects, args.seeds, args.circle_components, args.step))
-        elif table == "correspondence":
-            print(correspondence_table(folder, objects, args.centers, args.flow_alphas))
-        elif table == "views":
-            print(view_gain_table(folder, objects, args.centers, args.view_alphas))
-        elif table == "pose":
-            records, alpha = pose_records(folder, objects, args.pose_seeds, args.components, args.interpolate)
-            print(pose_summary(records, alpha, symmetric_objects(folder, objects, args.symmetric_below)))
-        else:
-            print(synthesis_table(folder, objects, args.centers, args.alpha, max(args.seeds[0], 3)))
+    try:  # a bad folder, object list or angle: one line naming it, not a traceback
+        folder = CoilFolder(args.root)
+        objects = folder.objects if args.objects is None else parse_object_spec(args.objects)
+        for table in args.tables:
+            print(_table(table, folder, objects, args))
+    except ValueError as exc:
+        p.error(str(exc))
     return 0
+
+
+def _table(table: str, folder: CoilFolder, objects: list[int], args: argparse.Namespace) -> str:
+    """One table of :func:`main`'s, from its parsed arguments."""
+    if table == "centers":
+        return center_table(folder, objects, args.centers, args.alpha, args.components)
+    if table == "circle":
+        return circle_table(folder, objects, args.seeds, args.circle_components, args.step)
+    if table == "correspondence":
+        return correspondence_table(folder, objects, args.centers, args.flow_alphas)
+    if table == "views":
+        return view_gain_table(folder, objects, args.centers, args.view_alphas)
+    if table == "pose":
+        records, alpha = pose_records(folder, objects, args.pose_seeds, args.components, args.interpolate)
+        return pose_summary(records, alpha, symmetric_objects(folder, objects, args.symmetric_below))
+    return synthesis_table(folder, objects, args.centers, args.alpha, max(args.seeds[0], 3))
 
 
 if __name__ == "__main__":
