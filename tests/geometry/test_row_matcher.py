@@ -185,9 +185,9 @@ def test_cost_volume_in_label_chunks_is_the_same(monkeypatch: pytest.MonkeyPatch
     from torch_eigview.geometry import row_matcher
 
     views, _ = _pair("head", 30.0)
-    monkeypatch.setattr(row_matcher, "_CHUNK", {"cpu": 1 << 19})
+    monkeypatch.setattr(row_matcher, "_CHUNK_CPU", 1 << 19)
     reference = match_rows(views[:1], views[1:], 30.0)
-    monkeypatch.setattr(row_matcher, "_CHUNK", {"cpu": chunk})
+    monkeypatch.setattr(row_matcher, "_CHUNK_CPU", chunk)
     chunked = match_rows(views[:1], views[1:], 30.0)
     for name in ("disparity_12", "disparity_21", "vertical_12", "vertical_21", "valid_12", "valid_21"):
         assert torch.equal(getattr(chunked, name), getattr(reference, name)), name

@@ -21,8 +21,9 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -140,17 +141,24 @@ _REFERENCE = (
 )
 
 
+def _quiet_and_loaded(
+    setting: str, run: Callable[[], float | None], n_procs: int, timeout_s: float
+) -> dict[str, Any]:
+    """One row of the threads table: ``run`` on the machine as it is, then beside the neighbour."""
+    quiet = run()
+    with cpu_neighbour(n_procs, timeout_s + 5):
+        loaded = run()
+    ratio = None if quiet is None or loaded is None else loaded / quiet
+    return {"setting": setting, "quiet_s": quiet, "loaded_s": loaded, "loaded_over_quiet": ratio}
+
+
 def _reference_rows(n_procs: int, timeout_s: float, iters: int) -> list[dict[str, Any]]:
     """The reference job on one and on two threads, quiet then beside the neighbour."""
     rows = []
     for n_threads in (1, 2):
         argv = ["-c", _REFERENCE.format(threads=n_threads, iters=iters)]
         name = f"reference: {n_threads} thread{'s' if n_threads > 1 else ''}"
-        quiet = _run_python(argv, timeout_s, name)
-        with cpu_neighbour(n_procs, timeout_s + 5):
-            loaded = _run_python(argv, timeout_s, name)
-        ratio = None if quiet is None or loaded is None else loaded / quiet
-        rows.append({"setting": name, "quiet_s": quiet, "loaded_s": loaded, "loaded_over_quiet": ratio})
+        rows.append(_quiet_and_loaded(name, partial(_run_python, argv, timeout_s, name), n_procs, timeout_s))
     return rows
 
 
@@ -194,13 +202,10 @@ def bench_threads(
         f"{' '.join(one)} --threads 2".strip(): [*one, "--threads", "2"],
     }
     n_procs = neighbour_procs or available_cpus()
-    rows = []
-    for name, extra in settings.items():
-        quiet = _run_command([*base, *extra], timeout_s)
-        with cpu_neighbour(n_procs, timeout_s + 5):
-            loaded = _run_command([*base, *extra], timeout_s)
-        ratio = None if quiet is None or loaded is None else loaded / quiet
-        rows.append({"setting": name, "quiet_s": quiet, "loaded_s": loaded, "loaded_over_quiet": ratio})
+    rows = [
+        _quiet_and_loaded(name, partial(_run_command, [*base, *extra], timeout_s), n_procs, timeout_s)
+        for name, extra in settings.items()
+    ]
     return {
         "command": " ".join(base),
         "neighbour_procs": n_procs,

@@ -31,6 +31,7 @@ from collections.abc import Mapping, Sequence
 import torch
 
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.nn.functional import unit_rows
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
 
 __all__ = ["VARIANTS", "pair_view_stats", "view_gain_table"]
@@ -41,12 +42,6 @@ VARIANTS: dict[str, dict[str, object]] = {
     "default": {},
     "size normalization: off": {"extent": False},
 }
-
-
-def _unit(views: torch.Tensor) -> torch.Tensor:
-    """(V, D) float64 rows of unit norm from (V, C, H, W) views."""
-    flat = views.flatten(1).double()
-    return flat / flat.norm(dim=1, keepdim=True).clamp_min(1e-12)
 
 
 def pair_view_stats(
@@ -67,9 +62,9 @@ def pair_view_stats(
     """
     n_synth = round(alpha) + 1
     thetas = torch.arange(n_synth, dtype=torch.float64)
-    synth = _unit(synthesize_views(seeds, alpha, thetas, options).views)
-    seed = _unit(seeds)
-    views = _unit(real)
+    synth = unit_rows(synthesize_views(seeds, alpha, thetas, options).views.double())
+    seed = unit_rows(seeds.double())
+    views = unit_rows(real.double())
     distance = torch.cdist(views, synth)  # (R, T)
     to_seed = torch.cdist(views, seed).amin(dim=1)
     nearest = distance.argmin(dim=1).double()

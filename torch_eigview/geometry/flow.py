@@ -118,8 +118,7 @@ def _torch_tvl1(
     if v1.ndim == 3:
         v1, v2 = v1[None], v2[None]
     b = v1.shape[0]
-    check_range(v1, v2, "tvl1")
-    largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
+    largest = check_range(v1, v2, "tvl1")
     # Grayscale as the reference path makes it (float64 mean, then scikit-image's float32),
     # where the device has float64 (not MPS).
     wide = torch.float64 if v1.device.type in ("cpu", "cuda") else torch.float32

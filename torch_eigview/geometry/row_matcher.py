@@ -48,8 +48,8 @@ COSTS = ("adgrad", "zncc")
 # it: on the CPU a few MB, so that the sampled features, their differences and the patch
 # sums of a slice stay in cache (the same values as one call over every label, 1.6x faster
 # at 45°, 1.15x at 10°); elsewhere (a GPU) large, few kernel launches. Both bound memory.
-_CHUNK = {"cpu": 1 << 19}
-_CHUNK_OTHER = 1 << 24
+_CHUNK_CPU = 1 << 19
+_CHUNK = 1 << 24
 
 
 def _features(gray: torch.Tensor, cost: str) -> torch.Tensor:
@@ -115,7 +115,8 @@ def _cost_volume(
     """(N, L, H, W) patch cost of matching each ``ref`` pixel to ``other`` at ``grid``."""
     n, f, h, w = ref.shape
     n_labels = grid.shape[1]
-    per_label = max(1, _CHUNK.get(ref.device.type, _CHUNK_OTHER) // max(1, n * f * h * w))
+    chunk = _CHUNK_CPU if ref.device.type == "cpu" else _CHUNK
+    per_label = max(1, chunk // max(1, n * f * h * w))
     out = []
     for start in range(0, n_labels, per_label):
         g = grid[:, start : start + per_label]

@@ -222,8 +222,9 @@ def diverged(method: str, largest: float) -> ValueError:
     )
 
 
-def check_range(v1: torch.Tensor, v2: torch.Tensor, method: str) -> None:
-    """Raises the error of views whose values TV-L1's float32 squared gradients cannot take."""
+def check_range(v1: torch.Tensor, v2: torch.Tensor, method: str) -> float:
+    """The views' largest magnitude (0 for empty views); raises the error of views whose
+    values TV-L1's float32 squared gradients cannot take."""
     largest = max(float(v1.abs().max()), float(v2.abs().max())) if v1.numel() else 0.0
     if largest > max_magnitude(torch.float32):
         raise ValueError(
@@ -231,6 +232,7 @@ def check_range(v1: torch.Tensor, v2: torch.Tensor, method: str) -> None:
             f"squared gradients overflow beyond {max_magnitude(torch.float32):.3g}): the views must be image "
             f"intensities, e.g. in [0, 1]"
         )
+    return largest
 
 
 def max_magnitude(dtype: torch.dtype) -> float:

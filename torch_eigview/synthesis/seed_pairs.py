@@ -160,9 +160,8 @@ def _by_angle(
     epipolar range of one α; the full circle has one α for all its pairs), and each pair's
     share of its call's seconds."""
     n = len(steps)
-    corrs: list[Correspondence] = []
-    seconds: list[float] = []
-    slots: dict[int, tuple[Correspondence, float]] = {}
+    corrs: list[Correspondence | None] = [None] * (n * len(objects))
+    seconds = [0.0] * len(corrs)
     for step in sorted(set(steps)):
         pairs = [i for i in range(n) if steps[i] == step]
         t0 = time.perf_counter()
@@ -181,11 +180,10 @@ def _by_angle(
         share = (time.perf_counter() - t0) / len(batch)
         at = [o * n + i for o in range(len(objects)) for i in pairs]
         for j, corr in zip(at, batch, strict=True):
-            slots[j] = (corr, share)
-    for j in range(n * len(objects)):  # every slot is filled: each pair has one angle
-        corrs.append(slots[j][0])
-        seconds.append(slots[j][1])
-    return corrs, seconds
+            corrs[j], seconds[j] = corr, share
+    filled = [c for c in corrs if c is not None]
+    assert len(filled) == len(corrs), "each pair has one angle, so every slot is filled"
+    return filled, seconds
 
 
 def _batched_tvl1(
