@@ -89,3 +89,85 @@ def test_float_in_unit_interval_kept(tmp_path: Path) -> None:
     pixels = np.linspace(0, 1, 20, dtype=np.float32).reshape(4, 5)
     tifffile.imwrite(path, pixels)
     np.testing.assert_array_equal(read_image(path)[0], pixels)
+
+
+def _pillow_images() -> dict[str, object]:
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+
+    def u8(*shape: int) -> np.ndarray:
+        return rng.integers(0, 256, shape, dtype=np.uint8)
+
+    palette = Image.fromarray(u8(7, 5, 3), "RGB").convert("P")
+    clear = palette.copy()
+    clear.info["transparency"] = 3
+    return {
+        "L": Image.fromarray(u8(7, 5), "L"),
+        "LA": Image.fromarray(u8(7, 5, 2), "LA"),
+        "RGB": Image.fromarray(u8(7, 5, 3), "RGB"),
+        "RGBA": Image.fromarray(u8(7, 5, 4), "RGBA"),
+        "I16": Image.fromarray(rng.integers(0, 65536, (7, 5), dtype=np.uint16)),
+        "P": palette,
+        "P-transparent": clear,
+        "1": Image.fromarray(u8(7, 5) // 128 * 255, "L").convert("1"),
+    }
+
+
+# Every mode in the formats Pillow can write it to (JPEG and BMP hold no alpha; webp is RGB(A)).
+_WRITABLE = [(m, "png") for m in _pillow_images()] + [
+    *((m, "bmp") for m in ("L", "RGB", "RGBA", "P", "1")),
+    *((m, "jpg") for m in ("L", "RGB", "1")),
+    *((m, "webp") for m in ("L", "LA", "RGB", "RGBA", "P")),
+]
+
+
+@pytest.mark.parametrize(("mode", "suffix"), _WRITABLE)
+def test_pillow_decoding_matches_skimage(tmp_path: Path, mode: str, suffix: str) -> None:
+    """The Pillow fast path gives what skimage.io.imread (the reference) gives, dtype included."""
+    path = tmp_path / f"{mode}.{suffix}"
+    _pillow_images()[mode].save(path)  # type: ignore[attr-defined]
+    reference = np.asarray(skimage.io.imread(path))
+    reference = reference[None] if reference.ndim == 2 else np.moveaxis(reference, -1, 0)
+    got = read_image(path, keep_alpha=True)
+    assert got.dtype == reference.dtype
+    np.testing.assert_array_equal(got, reference)
+
+
+def test_one_frame_gif_read_as_rgb(tmp_path: Path) -> None:
+    """A one-frame GIF (which skimage reads as (1, H, W, 3)) is an RGB image of its palette."""
+    path = tmp_path / "one.gif"
+    _pillow_images()["RGB"].save(path)  # type: ignore[attr-defined]
+    got = read_image(path)
+    assert got.shape == (3, 7, 5) and got.dtype == np.uint8
+    np.testing.assert_array_equal(got, np.moveaxis(np.asarray(skimage.io.imread(path))[0], -1, 0))
+
+
+def test_animated_gif_refused(tmp_path: Path) -> None:
+    from PIL import Image
+
+    frames = [Image.fromarray(np.full((4, 5), v, dtype=np.uint8), "L") for v in (0, 128, 255)]
+    path = tmp_path / "anim.gif"
+    frames[0].save(path, save_all=True, append_images=frames[1:])
+    with pytest.raises(ValueError, match=r"anim\.gif holds 3 pages or frames"):
+        read_image(path)
+
+
+def test_corrupt_png_named(tmp_path: Path) -> None:
+    path = _png(tmp_path / "cut.png")
+    path.write_bytes(path.read_bytes()[:40])
+    with pytest.raises(ValueError, match=r"cannot read image .*cut\.png"):
+        read_image(path)
+
+
+def test_unknown_format_named(tmp_path: Path) -> None:
+    path = tmp_path / "noise.png"
+    path.write_bytes(b"not an image at all")
+    with pytest.raises(ValueError, match=r"cannot read image .*noise\.png"):
+        read_image(path)
+
+
+def test_coil_images_match_skimage(coil_root: Path) -> None:
+    files = sorted(Path(coil_root).glob("obj1__*.png"))[:6]
+    for path in files:
+        np.testing.assert_array_equal(read_image(path)[0], skimage.io.imread(path))

@@ -2,7 +2,7 @@
 
 COIL-20 ("processed") names pose ``P`` by its index (the view at ``5·P`` degrees); COIL-100
 uses the same layout with ``P`` in degrees. :class:`CoilFolder` scans a folder once, reads
-files lazily with ``skimage.io.imread`` and caches the decoded pixels.
+files lazily with :func:`~torch_eigview.io.images.read_image` and caches the decoded pixels.
 """
 
 from __future__ import annotations

@@ -21,7 +21,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import ndimage
 
 __all__ = [
     "LUMA",
@@ -113,6 +112,8 @@ def background_colours(
 def clean_mask(mask: np.ndarray, min_area: int) -> np.ndarray:
     """``(H, W)`` bool ``mask`` with foreground components and background holes smaller
     than ``min_area`` pixels flipped."""
+    from scipy import ndimage  # imported here: a quarter second that views without masks never pay
+
     labels, n = ndimage.label(mask)
     if n:
         sizes = np.bincount(labels.ravel(), minlength=n + 1)
