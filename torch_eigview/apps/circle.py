@@ -23,7 +23,7 @@ import torch
 
 from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.angles import angle_range
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, synthesize_views
+from torch_eigview.synthesis import PairGeometry, SynthesisOptions, SynthesizedViews, synthesize_views
 
 __all__ = ["CircleLayout", "check_overlap", "circle_layout", "synthesize_circle"]
 
@@ -146,6 +146,7 @@ def synthesize_circle(
     options: SynthesisOptions | None = None,
     masks: torch.Tensor | None = None,
     overlap: float = 0.0,
+    geometry: Sequence[PairGeometry] | None = None,
 ) -> SynthesizedViews:
     """One object's views all round from its M evenly spaced seed views.
 
@@ -161,6 +162,9 @@ def synthesize_circle(
         masks: optional (M, H, W) bool seed masks, in place of the brightness threshold.
         overlap: degrees each pair extrapolates past its seeds, in [0, α/2] and below
             90 − α (Eq. 7 holds within a quarter turn of a pair's first seed).
+        geometry: the M pairs' correspondences (pair k: seeds k and k + 1 mod M), if
+            already computed (:func:`~torch_eigview.synthesis.pair_geometry` of each pair);
+            None measures them.
 
     Returns:
         :class:`~torch_eigview.synthesis.SynthesizedViews`: (M·T, C, H, W) views, their
@@ -168,11 +172,14 @@ def synthesize_circle(
         each view's pair k.
 
     Raises:
-        ValueError: fewer than 3 seeds, or ``overlap`` outside [0, α/2] or not below 90 − α.
+        ValueError: fewer than 3 seeds, ``overlap`` outside [0, α/2] or not below 90 − α,
+            or a ``geometry`` without one record per pair.
     """
     m = seeds.shape[0]
     if m < 3:  # M = 2 puts the seeds 180 degrees apart, where Eq. 7's sin(alpha) is 0
         raise ValueError(f"seeds must hold M >= 3 views evenly spaced round the circle, got M={m}")
+    if geometry is not None and len(geometry) != m:
+        raise ValueError(f"geometry must hold one record per seed pair (M = {m}), got {len(geometry)}")
     alpha = 360.0 / m
     overlap = check_overlap(m, overlap)
     thetas = [t for t in angle_range(0.0, alpha, step, "circle step") if t < alpha - _TOL]
@@ -184,7 +191,12 @@ def synthesize_circle(
     for k in range(m):
         pair = [k, (k + 1) % m]
         out = synthesize_views(
-            seeds[pair], alpha, thetas, options, masks=None if masks is None else masks[pair]
+            seeds[pair],
+            alpha,
+            thetas,
+            options,
+            geometry=None if geometry is None else [geometry[k]],
+            masks=None if masks is None else masks[pair],
         )
         views.append(out.views)
         elevations += out.elevations

@@ -14,6 +14,9 @@
   default options and for each stage ablated or swapped (:data:`ABLATIONS`);
 - ``correspondence``: each flow's seed-pair disparities against the motion chained
   through the real views between the seeds (:mod:`torch_eigview.apps.diagnose_flow`);
+- ``chained``: ``nvs`` per center and per M with that chained real motion as every seed
+  pair's correspondence, beside the default flow and ``dense``: what better
+  correspondences alone could give (:mod:`torch_eigview.apps.diagnose_chained`);
 - ``views``: the synthesized views as a sequence against the real views between the
   seeds: how much nearer than the seeds they come, the pull of a real view's nearest
   synthesized angle towards the seeds, and jumps (:mod:`torch_eigview.apps.diagnose_views`);
@@ -39,6 +42,7 @@ from dataclasses import dataclass
 import torch
 
 from torch_eigview.apps.circle import circle_layout
+from torch_eigview.apps.diagnose_chained import chained_table
 from torch_eigview.apps.diagnose_flow import correspondence_table
 from torch_eigview.apps.diagnose_views import view_gain_table
 from torch_eigview.apps.experiment import CoilExperiment
@@ -62,7 +66,7 @@ __all__ = [
 ]
 
 #: The tables :func:`main` prints.
-TABLES = ("centers", "circle", "synthesis", "pose", "correspondence", "views")
+TABLES = ("centers", "circle", "synthesis", "pose", "correspondence", "views", "chained")
 
 # Each stage of the synthesis swapped for an alternative (or switched off), one at a time.
 ABLATIONS: dict[str, dict[str, object]] = {
@@ -340,6 +344,17 @@ def _table(table: str, folder: CoilFolder, objects: list[int], args: argparse.Na
         return correspondence_table(folder, objects, args.centers, args.flow_alphas)
     if table == "views":
         return view_gain_table(folder, objects, args.centers, args.view_alphas)
+    if table == "chained":
+        return chained_table(
+            folder,
+            objects,
+            args.centers,
+            args.alpha,
+            args.seeds,
+            args.components,
+            args.circle_components,
+            args.step,
+        )
     if table == "pose":
         records, alpha = pose_records(folder, objects, args.pose_seeds, args.components, args.interpolate)
         return pose_summary(records, alpha, symmetric_objects(folder, objects, args.symmetric_below))

@@ -55,9 +55,7 @@ from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import wrap_angle
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.scale.parallel import KINDS
-from torch_eigview.synthesis import (
-    SynthesisOptions,
-)
+from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
@@ -288,6 +286,15 @@ class CoilExperiment:
         angles = None if layout is not None else self.synth_angles()
         return seeds, self.alpha, angles, self.synth[2], self.synthesis, self.overlap
 
+    def _synthesized(
+        self, folder: CoilFolder, objects: list[int], ticks: Iterable[int], layout: CircleLayout | None
+    ) -> Iterator[tuple[int, SynthesizedViews]]:
+        """``(obj, views)`` of each object's ``nvs`` gallery, in order, over ``workers``."""
+        workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
+        copy = workers > 0 and self.worker_kind == "process"
+        jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
+        return object_galleries(jobs, ticks, workers, self.worker_kind)
+
     def _galleries(
         self,
         folder: CoilFolder,
@@ -302,10 +309,7 @@ class CoilExperiment:
         if self.method != "nvs":
             yield from (self._real_gallery(folder, obj, layout) for obj in ticks)
             return
-        workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
-        copy = workers > 0 and self.worker_kind == "process"
-        jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
-        for obj, out in object_galleries(jobs, ticks, workers, self.worker_kind):
+        for obj, out in self._synthesized(folder, objects, ticks, layout):
             for key, value in out.seconds.items():
                 seconds[key] += value
             elevations[obj] = out.elevations

@@ -1,0 +1,105 @@
+"""The chained-motion diagnosis: its geometry against the chained motion itself, the full
+circle's geometry parameter, the experiment against ``eigview coil``'s with the same
+geometry, the table on COIL-20 and bad seed poses."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import torch
+
+from torch_eigview.apps import diagnose_chained
+from torch_eigview.apps.circle import synthesize_circle
+from torch_eigview.apps.diagnose import TABLES
+from torch_eigview.apps.diagnose_chained import ChainedExperiment, chained_geometry, chained_table
+from torch_eigview.apps.diagnose_flow import chained_disparity
+from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.synthesis import SynthesisOptions, pair_geometry
+
+
+def test_geometry_is_the_chained_motion(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each pair's disparities are the motion chained through the views between its seeds
+    (both ways), every pixel trusted, the default flow's elevation; closed, the last pair
+    runs from the last seed round through 360° to the first."""
+    opts = SynthesisOptions()
+    geometry = chained_geometry(folder, 1, [0.0, 10.0, 20.0], opts)
+    assert len(geometry) == 2
+    between = folder.images(1, [10.0, 15.0, 20.0])
+    corr = geometry[1].correspondence
+    assert torch.equal(corr.disparity_12[0], chained_disparity(between))
+    assert torch.equal(corr.disparity_21[0], chained_disparity(between.flip(0)))
+    assert bool(corr.valid_12.all()) and bool(corr.valid_21.all())
+    assert geometry[1].elevation == pair_geometry(between[[0, -1]], 10.0, opts)[0].elevation
+    # The closing pair (its flow's elevation stood in for: only the motion is checked here).
+    stand_in = geometry[0]
+    monkeypatch.setattr(diagnose_chained, "pair_geometry", lambda *args: [stand_in])
+    closed = chained_geometry(folder, 1, [0.0, 90.0, 180.0, 270.0], opts, closed=True)
+    assert len(closed) == 4
+    wrap = folder.images(1, [270.0 + 5.0 * i for i in range(18)] + [0.0])
+    assert torch.equal(closed[3].correspondence.disparity_12[0], chained_disparity(wrap))
+
+
+@pytest.mark.parametrize(
+    ("poses", "match"),
+    [
+        ([0.0], "at least two seed poses"),
+        ([0.0, 12.0], "seed poses 0 and 12 must be a positive multiple of the pose step 5 apart"),
+        ([10.0, 0.0], "seed poses 10 and 0 must be a positive multiple"),
+    ],
+)
+def test_bad_seed_poses_named(folder: CoilFolder, poses: list[float], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        chained_geometry(folder, 1, poses, SynthesisOptions())
+
+
+def test_circle_geometry_parameter(folder: CoilFolder) -> None:
+    """The full circle from precomputed geometry gives the views it measures itself."""
+    seeds = folder.images(2, [0.0, 90.0, 180.0, 270.0])
+    opts = SynthesisOptions()
+    geometry = [pair_geometry(seeds[[k, (k + 1) % 4]], 90.0, opts)[0] for k in range(4)]
+    own = synthesize_circle(seeds, 20.0, opts)
+    given = synthesize_circle(seeds, 20.0, opts, geometry=geometry)
+    assert torch.equal(own.views, given.views) and torch.equal(own.thetas, given.thetas)
+    with pytest.raises(ValueError, match=r"geometry must hold one record per seed pair \(M = 4\), got 2"):
+        synthesize_circle(seeds, 20.0, opts, geometry=geometry[:2])
+
+
+@pytest.mark.slow
+def test_experiment_with_the_flows_geometry_is_eigview_coils(
+    folder: CoilFolder, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Given the default flow's geometry instead of the chained motion, the experiment
+    reproduces ``eigview coil``'s run exactly: its galleries differ in the geometry alone."""
+
+    def flow_geometry(folder, obj, poses, options, *, closed=False, step=5.0):  # type: ignore[no-untyped-def]
+        seeds = folder.images(obj, list(poses))
+        pairs = [(k, k + 1) for k in range(len(poses) - 1)] + ([(len(poses) - 1, 0)] if closed else [])
+        alpha = (poses[1] - poses[0]) % 360.0
+        return [pair_geometry(seeds[[i, j]], alpha, options)[0] for i, j in pairs]
+
+    monkeypatch.setattr(diagnose_chained, "chained_geometry", flow_geometry)
+    for base in (
+        CoilExperiment(alpha=10.0, center=90.0, objects=[1, 3], synth=(-10.0, 10.0, 5.0), components=5),
+        CoilExperiment(seeds=4, objects=[1, 3], synth=(0.0, 0.0, 15.0), interpolate_pose=True, components=5),
+    ):
+        fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+        ours, theirs = ChainedExperiment(**fields).run(folder), base.run(folder)
+        assert ours.accuracy == theirs.accuracy and ours.per_object == theirs.per_object
+        assert ours.pose_mae_deg == theirs.pose_mae_deg
+        assert ours.n_train_views == theirs.n_train_views
+
+
+@pytest.mark.slow
+def test_table_on_coil(folder: CoilFolder) -> None:
+    """Two objects and one center (the full circle's path is the experiment test's): its
+    row, accuracies in [0, 100], and the chained motion at 10° as good as the flow's."""
+    assert "chained" in TABLES
+    table = chained_table(folder, [1, 3], [0.0], 10.0, [], 5, 5)
+    lines = table.splitlines()
+    assert lines[1].split() == ["flow", "chained", "dense", "pose", "md", "chained"]
+    rows = {" ".join(line.split()[:-5]): [float(v) for v in line.split()[-5:]] for line in lines[2:]}
+    assert list(rows) == ["center 0"]
+    flow, chained, dense = rows["center 0"][:3]
+    assert all(0.0 <= v <= 100.0 for v in (flow, chained, dense)) and chained >= flow - 5.0
