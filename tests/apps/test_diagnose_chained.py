@@ -19,10 +19,9 @@ from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.synthesis import SynthesisOptions, pair_geometry
 
 
-def test_geometry_is_the_chained_motion(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_geometry_is_the_chained_motion(folder: CoilFolder) -> None:
     """Each pair's disparities are the motion chained through the views between its seeds
-    (both ways), every pixel trusted, the default flow's elevation; closed, the last pair
-    runs from the last seed round through 360° to the first."""
+    (both ways), every pixel trusted, with the default flow's elevation."""
     opts = SynthesisOptions()
     geometry = chained_geometry(folder, 1, [0.0, 10.0, 20.0], opts)
     assert len(geometry) == 2
@@ -32,21 +31,52 @@ def test_geometry_is_the_chained_motion(folder: CoilFolder, monkeypatch: pytest.
     assert torch.equal(corr.disparity_21[0], chained_disparity(between.flip(0)))
     assert bool(corr.valid_12.all()) and bool(corr.valid_21.all())
     assert geometry[1].elevation == pair_geometry(between[[0, -1]], 10.0, opts)[0].elevation
-    # The closing pair (its flow's elevation stood in for: only the motion is checked here).
-    stand_in = geometry[0]
-    monkeypatch.setattr(diagnose_chained, "pair_geometry", lambda *args: [stand_in])
-    closed = chained_geometry(folder, 1, [0.0, 90.0, 180.0, 270.0], opts, closed=True)
-    assert len(closed) == 4
-    wrap = folder.images(1, [270.0 + 5.0 * i for i in range(18)] + [0.0])
-    assert torch.equal(closed[3].correspondence.disparity_12[0], chained_disparity(wrap))
+
+
+@pytest.mark.parametrize(
+    ("poses", "closed", "pair", "chain", "angle"),
+    [
+        # The closing pair of a circle from 90°: 270° round through 360° to 0°.
+        ([90.0, 180.0, 270.0, 0.0], True, 2, [270.0 + 5.0 * i for i in range(18)] + [0.0], 90.0),
+        ([0.0, 90.0, 180.0, 270.0], True, 3, [270.0 + 5.0 * i for i in range(18)] + [0.0], 90.0),
+        # A negative α: from 0° down through 355°.
+        ([0.0, -10.0], False, 0, [0.0, 355.0, 350.0], -10.0),
+    ],
+    ids=["circle-from-90", "closing-pair", "negative-alpha"],
+)
+def test_pairs_chain_the_short_way_round(
+    folder: CoilFolder,
+    monkeypatch: pytest.MonkeyPatch,
+    poses: list[float],
+    closed: bool,
+    pair: int,
+    chain: list[float],
+    angle: float,
+) -> None:
+    """Each pair chains the views from its first seed to its second the short way round
+    (the flow's elevation stood in for: only the motion is checked here)."""
+    stand_in = pair_geometry(folder.images(1, [0.0, 10.0]), 10.0, SynthesisOptions())
+    angles: list[float] = []
+
+    def flow(seeds: torch.Tensor, alpha: float, options: SynthesisOptions) -> list:  # type: ignore[type-arg]
+        angles.append(alpha)
+        return stand_in
+
+    monkeypatch.setattr(diagnose_chained, "pair_geometry", flow)
+    geometry = chained_geometry(folder, 1, poses, SynthesisOptions(), closed=closed)
+    assert len(geometry) == len(poses) - (0 if closed else 1)
+    views = folder.images(1, chain)
+    assert torch.equal(geometry[pair].correspondence.disparity_12[0], chained_disparity(views))
+    assert torch.equal(geometry[pair].correspondence.disparity_21[0], chained_disparity(views.flip(0)))
+    assert angles[pair] == angle  # the flow (elevation) sees the pair at its signed angle
 
 
 @pytest.mark.parametrize(
     ("poses", "match"),
     [
         ([0.0], "at least two seed poses"),
-        ([0.0, 12.0], "seed poses 0 and 12 must be a positive multiple of the pose step 5 apart"),
-        ([10.0, 0.0], "seed poses 10 and 0 must be a positive multiple"),
+        ([0.0, 12.0], "seed poses 0 and 12 must be a nonzero multiple of the pose step 5 apart"),
+        ([10.0, 10.0], "seed poses 10 and 10 must be a nonzero multiple"),
     ],
 )
 def test_bad_seed_poses_named(folder: CoilFolder, poses: list[float], match: str) -> None:
@@ -73,7 +103,10 @@ def test_experiment_with_the_flows_geometry_is_eigview_coils(
     """Given the default flow's geometry instead of the chained motion, the experiment
     reproduces ``eigview coil``'s run exactly: its galleries differ in the geometry alone."""
 
+    calls: list[int] = []
+
     def flow_geometry(folder, obj, poses, options, *, closed=False, step=5.0):  # type: ignore[no-untyped-def]
+        calls.append(obj)
         seeds = folder.images(obj, list(poses))
         pairs = [(k, k + 1) for k in range(len(poses) - 1)] + ([(len(poses) - 1, 0)] if closed else [])
         alpha = (poses[1] - poses[0]) % 360.0
@@ -85,7 +118,9 @@ def test_experiment_with_the_flows_geometry_is_eigview_coils(
         CoilExperiment(seeds=4, objects=[1, 3], synth=(0.0, 0.0, 15.0), interpolate_pose=True, components=5),
     ):
         fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+        calls.clear()
         ours, theirs = ChainedExperiment(**fields).run(folder), base.run(folder)
+        assert calls == [1, 3]  # the galleries came from the geometry given
         assert ours.accuracy == theirs.accuracy and ours.per_object == theirs.per_object
         assert ours.pose_mae_deg == theirs.pose_mae_deg
         assert ours.n_train_views == theirs.n_train_views
@@ -93,13 +128,11 @@ def test_experiment_with_the_flows_geometry_is_eigview_coils(
 
 @pytest.mark.slow
 def test_table_on_coil(folder: CoilFolder) -> None:
-    """Two objects and one center (the full circle's path is the experiment test's): its
-    row, accuracies in [0, 100], and the chained motion at 10° as good as the flow's."""
+    """Two objects, one center and M = 4: a row each, accuracies in [0, 100]."""
     assert "chained" in TABLES
-    table = chained_table(folder, [1, 3], [0.0], 10.0, [], 5, 5)
+    table = chained_table(folder, [1, 3], [0.0], 10.0, [4], 5, 5, step=15.0)
     lines = table.splitlines()
     assert lines[1].split() == ["flow", "chained", "dense", "pose", "md", "chained"]
     rows = {" ".join(line.split()[:-5]): [float(v) for v in line.split()[-5:]] for line in lines[2:]}
-    assert list(rows) == ["center 0"]
-    flow, chained, dense = rows["center 0"][:3]
-    assert all(0.0 <= v <= 100.0 for v in (flow, chained, dense)) and chained >= flow - 5.0
+    assert list(rows) == ["center 0", "M = 4"]
+    assert all(0.0 <= v <= 100.0 for row in rows.values() for v in row[:3])

@@ -11,6 +11,7 @@ import skimage.io
 import torch
 
 from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
+from torch_eigview.io import images
 
 COIL20 = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "coil-20-proc"
 needs_coil20 = pytest.mark.skipif(
@@ -268,7 +269,7 @@ def test_float_images_kept_and_checked(tmp_path: Path, monkeypatch: pytest.Monke
     _write(tmp_path, "obj1__0.png", np.zeros((4, 4), dtype=np.uint8))
     _write(tmp_path, "obj1__1.png", np.zeros((4, 4), dtype=np.uint8))
     pixels = {"obj1__0.png": np.full((4, 4), 0.25), "obj1__1.png": np.full((4, 4), np.nan)}
-    monkeypatch.setattr(skimage.io, "imread", lambda path: pixels[Path(path).name])
+    monkeypatch.setattr(images, "_decode", lambda path: (pixels[Path(path).name], 1))
     folder = CoilFolder(tmp_path)
     assert torch.equal(folder.image(1, 0), torch.full((1, 4, 4), 0.25))
     with pytest.raises(ValueError, match=r"obj1__1\.png must be finite"):

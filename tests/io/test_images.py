@@ -101,7 +101,7 @@ def _pillow_images() -> dict[str, object]:
 
     palette = Image.fromarray(u8(7, 5, 3), "RGB").convert("P")
     clear = palette.copy()
-    clear.info["transparency"] = 3
+    clear.info["transparency"] = clear.getpixel((0, 0))
     return {
         "L": Image.fromarray(u8(7, 5), "L"),
         "LA": Image.fromarray(u8(7, 5, 2), "LA"),
@@ -114,8 +114,9 @@ def _pillow_images() -> dict[str, object]:
     }
 
 
-# Every mode in the formats Pillow can write it to (JPEG and BMP hold no alpha; webp is RGB(A)).
-_WRITABLE = [(m, "png") for m in _pillow_images()] + [
+# Every mode in the formats Pillow can write it to (JPEG holds no alpha, BMP no gray + alpha
+# or 16-bit gray, webp is RGB(A)); a palette with a transparent entry has its own test.
+_WRITABLE = [(m, "png") for m in _pillow_images() if m != "P-transparent"] + [
     *((m, "bmp") for m in ("L", "RGB", "RGBA", "P", "1")),
     *((m, "jpg") for m in ("L", "RGB", "1")),
     *((m, "webp") for m in ("L", "LA", "RGB", "RGBA", "P")),
@@ -123,15 +124,53 @@ _WRITABLE = [(m, "png") for m in _pillow_images()] + [
 
 
 @pytest.mark.parametrize(("mode", "suffix"), _WRITABLE)
-def test_pillow_decoding_matches_skimage(tmp_path: Path, mode: str, suffix: str) -> None:
-    """The Pillow fast path gives what skimage.io.imread (the reference) gives, dtype included."""
+def test_pillow_decoding_matches_skimage(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, mode: str, suffix: str
+) -> None:
+    """The Pillow path (scikit-image's reader is never called) gives what skimage.io.imread,
+    the reference, gives, dtype included, in an array of the caller's own."""
     path = tmp_path / f"{mode}.{suffix}"
     _pillow_images()[mode].save(path)  # type: ignore[attr-defined]
     reference = np.asarray(skimage.io.imread(path))
     reference = reference[None] if reference.ndim == 2 else np.moveaxis(reference, -1, 0)
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("skimage.io.imread was called for a mode Pillow decodes")
+
+    monkeypatch.setattr(skimage.io, "imread", refuse)
     got = read_image(path, keep_alpha=True)
-    assert got.dtype == reference.dtype
+    assert got.dtype == reference.dtype and got.flags.writeable
     np.testing.assert_array_equal(got, reference)
+
+
+def test_transparent_palette_keeps_its_alpha(tmp_path: Path) -> None:
+    """A palette PNG with a transparent entry: its colours as scikit-image gives them, and
+    with keep_alpha the transparency as alpha (Pillow's RGBA, the reference)."""
+    from PIL import Image
+
+    path = tmp_path / "cutout.png"
+    _pillow_images()["P-transparent"].save(path)  # type: ignore[attr-defined]
+    np.testing.assert_array_equal(read_image(path), np.moveaxis(skimage.io.imread(path), -1, 0))
+    with Image.open(path) as im:
+        rgba = np.moveaxis(np.asarray(im.convert("RGBA")), -1, 0)
+    got = read_image(path, keep_alpha=True)
+    np.testing.assert_array_equal(got, rgba)
+    assert got[3, 0, 0] == 0 and (got[3] == 255).any()  # the first pixel's entry is see-through
+
+
+def test_cmyk_read_as_rgb(tmp_path: Path) -> None:
+    """A CMYK JPEG is its RGB (Pillow's conversion, the reference), never its four raw
+    channels (whose K was once taken for alpha)."""
+    from PIL import Image
+
+    path = tmp_path / "cmyk.jpg"
+    _pillow_images()["RGB"].convert("CMYK").save(path)  # type: ignore[attr-defined]
+    with Image.open(path) as im:
+        assert im.mode == "CMYK"
+        rgb = np.moveaxis(np.asarray(im.convert("RGB")), -1, 0)
+    got = read_image(path, keep_alpha=True)
+    assert got.shape == (3, 7, 5)
+    np.testing.assert_array_equal(got, rgb)
 
 
 def test_one_frame_gif_read_as_rgb(tmp_path: Path) -> None:

@@ -16,7 +16,7 @@
   through the real views between the seeds (:mod:`torch_eigview.apps.diagnose_flow`);
 - ``chained``: ``nvs`` per center and per M with that chained real motion as every seed
   pair's correspondence, beside the default flow and ``dense``: what better
-  correspondences alone could give (:mod:`torch_eigview.apps.diagnose_chained`);
+  correspondences alone would change (:mod:`torch_eigview.apps.diagnose_chained`);
 - ``views``: the synthesized views as a sequence against the real views between the
   seeds: how much nearer than the seeds they come, the pull of a real view's nearest
   synthesized angle towards the seeds, and jumps (:mod:`torch_eigview.apps.diagnose_views`);

@@ -1,13 +1,14 @@
-"""The synthesis with the real motion: how far better correspondences alone could go.
+"""The synthesis with the real motion: what better correspondences alone would change.
 
-Every seed pair's correspondence is replaced by the motion chained through the real COIL
-views between its seeds (:func:`~torch_eigview.apps.diagnose_flow.chained_disparity`,
-TV-L1 between views one pose step apart, composed; both directions; every pixel trusted),
-and the elevation is the default flow's. Everything else is ``eigview coil``'s: the same
-warp, blend, size normalization, eigenspace and tests. Where the synthesis with this
-motion still falls short of a target, the shortfall is not the correspondence's (within
-the chained motion's own error): the views between the seeds show what neither seed
-shows. A diagnosis only: it reads the views that the experiment tests on.
+Every seed pair's horizontal correspondence is replaced by the motion chained through the
+real COIL views between its seeds (:func:`~torch_eigview.apps.diagnose_flow.chained_disparity`,
+TV-L1 between views one pose step apart, composed; both directions; every pixel trusted,
+so the flow's occlusion mask is not used); the elevation and the vertical components stay
+the default flow's. Everything else is ``eigview coil``'s: the same warp, blend, size
+normalization, eigenspace and tests. It is a reference, not a strict bound: the chain adds
+up TV-L1's small errors and trusts occluded pixels, and where the synthesis with it does
+no better than with the flow, the shortfall lies in what the seeds show, not in the
+matching. A diagnosis only: it reads the views that the experiment tests on.
 
 ``python -m torch_eigview.apps.diagnose chained --root DIR`` prints, per center (two seeds
 α apart, ``eigview coil --alpha A --center C``) and per M of the full circle
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import time
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
@@ -54,31 +56,37 @@ def chained_geometry(
     Args:
         folder: the images.
         obj: the object.
-        poses: the seed poses in degrees, increasing by whole multiples of ``step``.
+        poses: the seed poses in degrees; each pair is chained the short way round from its
+            first seed to its second (decreasing poses for a negative α, through 360° where
+            the poses wrap), a whole multiple of ``step`` and less than half a turn.
         options: the synthesis options (the default flow measures the elevation).
         closed: also the pair from the last seed round to the first (the full circle).
         step: the folder's pose step in degrees.
 
     Returns:
-        One :class:`~torch_eigview.synthesis.PairGeometry` per pair.
+        One :class:`~torch_eigview.synthesis.PairGeometry` per pair; its seconds are the
+        flow's and the chain's.
 
     Raises:
-        ValueError: fewer than two poses, or a pair not a positive multiple of ``step`` apart.
+        ValueError: fewer than two poses, or a pair not a nonzero multiple of ``step`` apart.
     """
     if len(poses) < 2:
         raise ValueError(f"poses must hold at least two seed poses, got {list(poses)}")
     ends = list(itertools.pairwise(poses))
     if closed:
-        ends.append((poses[-1], poses[0] + 360.0))
+        ends.append((poses[-1], poses[0]))
     out = []
     for first, last in ends:
-        n_steps = round((last - first) / step)
-        if n_steps < 1 or abs(n_steps * step - (last - first)) > 1e-6:
+        angle = (last - first + 180.0) % 360.0 - 180.0  # the short way round, in [-180, 180)
+        n_steps = round(abs(angle) / step)
+        if n_steps < 1 or abs(n_steps * step - abs(angle)) > 1e-6:
             raise ValueError(
-                f"seed poses {first:g} and {last:g} must be a positive multiple of the pose step {step:g} apart"
+                f"seed poses {first:g} and {last:g} must be a nonzero multiple of the pose step {step:g} apart"
             )
-        views = folder.images(obj, [(first + i * step) % 360.0 for i in range(n_steps + 1)])
-        flow = pair_geometry(views[[0, -1]], last - first, options)[0]
+        sign = 1.0 if angle > 0 else -1.0
+        views = folder.images(obj, [(first + sign * i * step) % 360.0 for i in range(n_steps + 1)])
+        flow = pair_geometry(views[[0, -1]], angle, options)[0]
+        t0 = time.perf_counter()
         c = flow.correspondence
         d12, d21 = chained_disparity(views), chained_disparity(views.flip(0))
         motion = dataclasses.replace(
@@ -88,7 +96,7 @@ def chained_geometry(
             valid_12=torch.ones_like(c.valid_12),
             valid_21=torch.ones_like(c.valid_21),
         )
-        out.append(PairGeometry(motion, flow.elevation, flow.seconds))
+        out.append(PairGeometry(motion, flow.elevation, flow.seconds + time.perf_counter() - t0))
     return out
 
 
@@ -96,7 +104,8 @@ def chained_geometry(
 class ChainedExperiment(CoilExperiment):
     """:class:`~torch_eigview.apps.experiment.CoilExperiment` whose ``nvs`` galleries are
     synthesized from :func:`chained_geometry` (in this process, object after object; the
-    ``sparse`` and ``dense`` galleries are the experiment's own)."""
+    ``sparse`` and ``dense`` galleries are the experiment's own). Errors and warnings come
+    as the synthesis raises them, not named by object as ``eigview coil`` names them."""
 
     def _synthesized(
         self, folder: CoilFolder, objects: list[int], ticks: Iterable[int], layout: CircleLayout | None
@@ -152,7 +161,7 @@ def chained_table(
     per M of the full circle (k = ``k_circle``, synthesized every ``step`` degrees, pose
     interpolated on the manifold)."""
     lines = [
-        "nvs with the default flow and with the real motion chained through the test views (a bound)",
+        "nvs with the default flow and with the real motion chained through the test views (a reference)",
         f"{'':>12} {'flow':>7} {'chained':>8} {'dense':>7} {'pose md':>7} {'chained':>8}",
     ]
     for c in centers:
