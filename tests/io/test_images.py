@@ -67,11 +67,17 @@ def test_device_refused() -> None:
         read_image("/dev/null")
 
 
-def test_multi_page_tiff_refused(tmp_path: Path) -> None:
+def test_multi_page_tiff_refused_undecoded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Refused from its header: the pages are never decoded."""
     path = tmp_path / "pages.tif"
     with tifffile.TiffWriter(path) as tif:
         for _ in range(3):
             tif.write(np.zeros((4, 5), dtype=np.uint8))
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a refused file was decoded")
+
+    monkeypatch.setattr(skimage.io, "imread", refuse)
     with pytest.raises(ValueError, match=r"pages\.tif holds 3 pages or frames"):
         read_image(path)
 

@@ -65,8 +65,10 @@ def check_regular_file(path: str | os.PathLike[str], what: str = "image") -> os.
     return info
 
 
-def _decode(path: str | os.PathLike[str]) -> tuple[np.ndarray, int]:
-    """The pixels and the number of pages or frames of one file (see the module's docstring)."""
+def _decode(path: str | os.PathLike[str]) -> tuple[np.ndarray | None, int]:
+    """The pixels and the number of pages or frames of one file (see the module's docstring);
+    a file of several is never decoded (None: it is refused, and a stack of large pages
+    would cost their memory first)."""
     if os.fspath(path).lower().endswith(_TIFF_SUFFIXES):
         import tifffile
 
@@ -76,6 +78,8 @@ def _decode(path: str | os.PathLike[str]) -> tuple[np.ndarray, int]:
         pixels, frames = _decode_pillow(path)
         if pixels is not None:
             return pixels, frames
+    if frames > 1:
+        return None, frames
     import skimage.io
 
     return np.asarray(skimage.io.imread(path)), frames
@@ -92,6 +96,8 @@ def _decode_pillow(path: str | os.PathLike[str]) -> tuple[np.ndarray | None, int
         return None, 1
     with im:
         frames = int(getattr(im, "n_frames", 1))
+        if frames > 1:
+            return None, frames
         colours: Image.Image = im
         if im.mode == "P" and im.palette is not None:
             # A palette image as its colours, with alpha where an entry is transparent.
@@ -123,7 +129,7 @@ def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False, what: 
         arr, frames = _decode(path)
     except Exception as exc:  # imageio/PIL raise OSError, SyntaxError, ... for bad files
         raise ValueError(f"cannot read image {path}: {exc}") from exc
-    if frames > 1:
+    if frames > 1 or arr is None:
         raise ValueError(f"image {path} holds {frames} pages or frames; one image per file is expected")
     if arr.ndim == 2:
         arr = arr[None]
