@@ -378,3 +378,14 @@ def test_object_geometries_batch_equals_each_object() -> None:
         mixed[1][0].correspondence.disparity_12,
         pair_geometry(objects[1][:, :, :16], 5.0)[0].correspondence.disparity_12,
     )
+
+
+def test_flow_kwargs_of_a_seed_pair() -> None:
+    """With a pair's angle the epipolar flows get it, the axis column and a given elevation;
+    the other flows their options alone."""
+    guided = SynthesisOptions(flow="guided", center=60.0).flow_kwargs(10.0)
+    assert guided["alpha"] == 10.0 and guided["center"] == 60.0 and "elevation" not in guided
+    assert guided.items() >= SynthesisOptions(flow="guided").flow_kwargs().items()  # the TV-L1 preset too
+    rows = SynthesisOptions(flow="rows", elevation=20.0).flow_kwargs(45.0)
+    assert rows == {"elevation": 20.0, "alpha": 45.0, "center": None}
+    assert SynthesisOptions(flow="tvl1").flow_kwargs(10.0) == SynthesisOptions(flow="tvl1").flow_kwargs()

@@ -76,16 +76,14 @@ def correspondence_table(
                 fg = foreground_mask(views[:1], SynthesisOptions().background)[0]
                 ref = reference[fg].double()
                 for flow in flows:
-                    # The flow as the synthesis runs it (its options, the angle for the
-                    # epipolar flows), without the elevation fit.
+                    # The flow as the synthesis runs it, without the elevation fit.
                     opts = SynthesisOptions(flow=flow)
-                    kwargs = (
-                        {"alpha": alpha, **opts.flow_kwargs()}
-                        if flow in ("rows", "guided")
-                        else opts.flow_kwargs()
-                    )
                     corr = estimate_correspondence(
-                        views[:1], views[-1:], method=flow, threshold=opts.threshold, **kwargs
+                        views[:1],
+                        views[-1:],
+                        method=flow,
+                        threshold=opts.threshold,
+                        **opts.flow_kwargs(alpha),
                     )
                     d = corr.disparity_12[0][fg].double()
                     slope = float((d * ref).sum() / (ref * ref).sum().clamp_min(1e-12))

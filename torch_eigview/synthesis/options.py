@@ -68,11 +68,24 @@ class SynthesisOptions:
     blend: str = "linear"
     silhouette: bool = False
 
-    def flow_kwargs(self) -> dict[str, object]:
-        """Keyword arguments for the flow function: ``flow_options``, else a fast preset."""
-        if self.flow_options is not None:
-            return dict(self.flow_options)
-        return dict(_FAST_TVL1) if self.flow in ("tvl1", "tvl1-skimage", "guided") else {}
+    def flow_kwargs(self, alpha: float | None = None) -> dict[str, object]:
+        """Keyword arguments for the flow function: ``flow_options``, else a fast preset.
+
+        With ``alpha`` (a seed pair's angle in degrees), the epipolar flows (``"rows"``,
+        ``"guided"``) also get the angle, ``center`` and a given ``elevation`` (the row
+        matcher searches its own for ``"auto"``): the arguments the synthesis runs them with.
+        """
+        kwargs: dict[str, object] = (
+            dict(self.flow_options)
+            if self.flow_options is not None
+            else dict(_FAST_TVL1)
+            if self.flow in ("tvl1", "tvl1-skimage", "guided")
+            else {}
+        )
+        if alpha is None or self.flow not in ("rows", "guided"):
+            return kwargs
+        given = {} if self.elevation == "auto" else {"elevation": self.elevation}
+        return {**given, **kwargs, "alpha": alpha, "center": self.center}
 
     def __post_init__(self) -> None:
         if self.flow not in FLOW_METHODS:

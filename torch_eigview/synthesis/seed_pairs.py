@@ -140,9 +140,7 @@ def object_geometries(
     if opts.flow not in _BATCHED or len(checked) < 2 or (len(shapes) > 1 and opts.flow != "tvl1"):
         return [pair_geometry(s, alpha, opts, m) for s, m in zip(checked, per_mask, strict=True)]
     if len(shapes) > 1:
-        raise ValueError(
-            f"objects must share one seed shape, got {sorted({tuple(s.shape) for s in checked})}"
-        )
+        raise ValueError(f"objects must share one seed shape, got {sorted(shapes)}")
     steps = pair_angles(alpha, checked[0].shape[0])
     corrs, seconds = _batched_tvl1(checked, opts) if opts.flow == "tvl1" else _by_angle(checked, steps, opts)
     n = len(steps)
@@ -165,17 +163,12 @@ def _by_angle(
     for step in sorted(set(steps)):
         pairs = [i for i in range(n) if steps[i] == step]
         t0 = time.perf_counter()
-        kwargs = opts.flow_kwargs()
-        if opts.flow in ("rows", "guided"):
-            # A given elevation is the row matcher's too (it searches its own otherwise).
-            given = {} if opts.elevation == "auto" else {"elevation": opts.elevation}
-            kwargs = {**given, **kwargs, "alpha": step, "center": opts.center}
         batch = estimate_correspondence(
             torch.cat([s[pairs] for s in objects]),
             torch.cat([s[[i + 1 for i in pairs]] for s in objects]),
             method=opts.flow,
             threshold=opts.threshold,
-            **kwargs,
+            **opts.flow_kwargs(step),
         )
         share = (time.perf_counter() - t0) / len(batch)
         at = [o * n + i for o in range(len(objects)) for i in pairs]
