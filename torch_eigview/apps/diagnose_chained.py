@@ -23,7 +23,6 @@ import dataclasses
 import itertools
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from typing import Any
 
 import torch
 
@@ -133,17 +132,16 @@ class ChainedExperiment(CoilExperiment):
 
 
 def _row(name: str, base: CoilExperiment, folder: CoilFolder) -> str:
-    runs: dict[str, Any] = {
-        "flow": base.run(folder),
-        "chained": ChainedExperiment(**{f.name: getattr(base, f.name) for f in dataclasses.fields(base)}).run(
-            folder
-        ),
-        "dense": dataclasses.replace(base, method="dense").run(folder),
-    }
-    flow, chained = runs["flow"], runs["chained"]
+    """One row of the table: ``base`` (nvs) with the flow and with the chained motion, and dense."""
+    chained = ChainedExperiment(**{f.name: getattr(base, f.name) for f in dataclasses.fields(base)})
+    flow, real, dense = (
+        base.run(folder),
+        chained.run(folder),
+        dataclasses.replace(base, method="dense").run(folder),
+    )
     return (
-        f"{name:>12} {flow.accuracy:7.2f} {chained.accuracy:8.2f} {runs['dense'].accuracy:7.2f} "
-        f"{flow.pose_median_deg:7.2f} {chained.pose_median_deg:8.2f}"
+        f"{name:>12} {flow.accuracy:7.2f} {real.accuracy:8.2f} {dense.accuracy:7.2f} "
+        f"{flow.pose_median_deg:7.2f} {real.pose_median_deg:8.2f}"
     )
 
 
