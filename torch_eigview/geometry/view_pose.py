@@ -1,0 +1,158 @@
+"""A view's angle between two seed views, from Eq. 2 over three-view correspondences.
+
+Eq. 2 ties a point's column in a view at ``theta`` to its columns in the seed views at
+0 and ``alpha`` (orthographic camera rotating about the vertical axis, whatever the
+camera's elevation)::
+
+    x3 = a·x1 + b·x2 + e,   a = sin(alpha − theta) / sin(alpha),   b = sin(theta) / sin(alpha),
+
+with ``e = c (1 − a − b)`` for the axis column c. Given the three columns of many points,
+(a, b, e) is a linear least-squares fit, and ``theta = atan2(b sin(alpha), a + b cos(alpha))``
+(``a + b cos(alpha) = cos(theta)``, ``b sin(alpha) = sin(theta)``). No depth and no axis
+column are needed: Eq. 2 has them eliminated. This is the pose of a test view by
+geometry rather than by appearance (the eigenspace's nearest gallery view), the paper's
+"future work": :func:`chain_columns` follows seed-1 pixels through two correspondences,
+seed 1 → view and view → seed 2, and :func:`fit_view_angle` fits θ to the three columns;
+:func:`torch_eigview.synthesis.view_angles` measures the correspondences with the
+synthesis's flow.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+
+from torch_eigview.check import check_alpha, check_float_tensor, check_ndim
+from torch_eigview.geometry.correspondence import Correspondence, check_correspondence
+
+__all__ = ["MIN_POINTS", "chain_columns", "fit_view_angle"]
+
+#: The fewest points a fit accepts (three unknowns; a few dozen make the robust scale sane).
+MIN_POINTS = 32
+
+#: Huber's constant in units of the residuals' robust scale, and the reweighting passes.
+_HUBER, _PASSES = 2.0, 10
+
+
+def fit_view_angle(
+    x1: torch.Tensor, x2: torch.Tensor, x3: torch.Tensor, use: torch.Tensor, alpha: float
+) -> torch.Tensor:
+    """The angle θ of each view from the columns of its points in both seeds and in it.
+
+    Fits ``x3 = a·x1 + b·x2 + e`` per view by iteratively reweighted least squares (Huber
+    weights, the scale from the median absolute residual), so mismatched points count
+    little, and returns ``atan2(b sin α, a + b cos α)``.
+
+    Args:
+        x1, x2, x3: (N, P) columns of P points in seed 1 (at 0), seed 2 (at ``alpha``) and
+            the view, per view n.
+        use: (N, P) bool, the points to fit.
+        alpha: the angle of seed 2 in degrees (not a multiple of 180).
+
+    Returns:
+        (N,) float64 angles in degrees from seed 1, in (−180, 180]; NaN for a view with
+        fewer than :data:`MIN_POINTS` points or a degenerate fit (all points on one column).
+
+    Raises:
+        TypeError / ValueError: tensors of other shapes or kinds, or a bad ``alpha``.
+
+    Example:
+        >>> x1 = torch.tensor([[10.0, 40.0, 70.0, 20.0] * 10])
+        >>> x2 = torch.tensor([[30.0, 35.0, 60.0, 50.0] * 10])
+        >>> a, b = math.sin(math.radians(20)) / math.sin(math.radians(30)), math.sin(math.radians(10)) / math.sin(math.radians(30))
+        >>> x3 = a * x1 + b * x2 + 5.0
+        >>> round(float(fit_view_angle(x1, x2, x3, torch.ones_like(x1, dtype=torch.bool), 30.0)[0]), 6)
+        10.0
+    """
+    al = math.radians(check_alpha(alpha))
+    cols = []
+    for v, name in ((x1, "x1"), (x2, "x2"), (x3, "x3")):
+        cols.append(check_float_tensor(v, name))
+        check_ndim(v, name, (2,), "(N, P)")
+    if not isinstance(use, torch.Tensor) or use.dtype != torch.bool:
+        raise TypeError(f"use must be a bool tensor, got {getattr(use, 'dtype', type(use).__name__)}")
+    shapes = {tuple(v.shape) for v in (*cols, use)}
+    if len(shapes) != 1:
+        raise ValueError(f"x1, x2, x3 and use must have one shape (N, P), got shapes {sorted(shapes)}")
+    p1, p2, p3 = (torch.where(use, v.double(), 0.0) for v in cols)
+    design = torch.stack([p1, p2, use.double()], dim=-1)  # (N, P, 3)
+    weight = use.double()
+    sol = design.new_zeros(design.shape[0], 3)
+    ok = use.sum(dim=1) >= MIN_POINTS
+    for _ in range(_PASSES):
+        wd = design * weight[..., None]
+        normal = wd.transpose(1, 2) @ design  # (N, 3, 3)
+        rhs = (wd * p3[..., None]).sum(dim=1)
+        # A singular system (every point on one column) is no fit: NaN, never a guess.
+        det_ok = torch.linalg.det(normal).abs() > 1e-9 * normal.diagonal(dim1=1, dim2=2).prod(-1).clamp_min(
+            1e-300
+        )
+        ok = ok & det_ok
+        eye = torch.eye(3, dtype=normal.dtype, device=normal.device)
+        sol = torch.linalg.solve(torch.where(ok[:, None, None], normal, eye), rhs)
+        resid = (p3 - (design @ sol[..., None])[..., 0]).abs()
+        scale = 1.4826 * torch.where(use, resid, math.nan).nanmedian(dim=1).values.clamp_min(1e-6)
+        weight = torch.where(use, (_HUBER * scale[:, None] / resid.clamp_min(1e-12)).clamp(max=1.0), 0.0)
+    a, b = sol[:, 0], sol[:, 1]
+    theta = torch.rad2deg(torch.atan2(b * math.sin(al), a + b * math.cos(al)))
+    return torch.where(ok, theta, math.nan)
+
+
+def chain_columns(
+    to_view: Correspondence, to_seed2: Correspondence, foreground: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The columns of seed-1 pixels in seed 1, seed 2 and the view, through the view.
+
+    A seed-1 pixel trusted by ``to_view`` is followed into the view (its vertical motion
+    included, where the correspondence has one), and ``to_seed2`` is read there, bilinearly
+    (its validity too: a point counts where all four neighbours are trusted).
+
+    Args:
+        to_view: (N, H, W) correspondences seed 1 → view n.
+        to_seed2: (N, H, W) correspondences view n → seed 2.
+        foreground: (H, W) or (N, H, W) bool, the seed-1 pixels to follow (the object).
+
+    Returns:
+        ``(x1, x2, x3, use)``, each (N, H·W): the columns in seed 1, seed 2 and the view,
+        and the points that passed, :func:`fit_view_angle`'s arguments.
+
+    Raises:
+        TypeError / ValueError: correspondences of other kinds or shapes, a bad mask.
+    """
+    to_view, to_seed2 = check_correspondence(to_view), check_correspondence(to_seed2)
+    if to_view.shape != to_seed2.shape:
+        raise ValueError(
+            f"to_view and to_seed2 must have one shape, got {to_view.shape} and {to_seed2.shape}"
+        )
+    n, h, w = to_view.shape
+    if not isinstance(foreground, torch.Tensor) or foreground.dtype != torch.bool:
+        raise TypeError(
+            f"foreground must be a bool tensor, got {getattr(foreground, 'dtype', type(foreground).__name__)}"
+        )
+    if foreground.shape not in ((h, w), (n, h, w)):
+        raise ValueError(
+            f"foreground must have shape ({h}, {w}) or ({n}, {h}, {w}), got {tuple(foreground.shape)}"
+        )
+    d = to_view.disparity_12
+    yy, xx = torch.meshgrid(
+        torch.arange(h, dtype=d.dtype, device=d.device),
+        torch.arange(w, dtype=d.dtype, device=d.device),
+        indexing="ij",
+    )
+    x3 = xx + d
+    y3 = yy + to_view.vertical_12 if to_view.vertical_12 is not None else yy.expand_as(x3)
+    x2 = x3 + _sample(to_seed2.disparity_12, x3, y3)
+    trusted = _sample(to_seed2.valid_12.to(d.dtype), x3, y3) > 0.999
+    use = foreground.to(d.device) & to_view.valid_12 & trusted
+    return xx.expand_as(x3).reshape(n, -1), x2.reshape(n, -1), x3.reshape(n, -1), use.reshape(n, -1)
+
+
+def _sample(field: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Bilinear samples of (N, H, W) ``field`` at pixel coordinates (N, H, W) (border padding,
+    ``align_corners=True``, the maps' convention)."""
+    _, h, w = field.shape
+    grid = torch.stack([x * (2.0 / max(w - 1, 1)) - 1, y * (2.0 / max(h - 1, 1)) - 1], dim=-1)
+    out = F.grid_sample(field[:, None], grid, mode="bilinear", padding_mode="border", align_corners=True)
+    return out[:, 0]
