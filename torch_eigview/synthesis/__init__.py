@@ -17,6 +17,9 @@ exactly one pair (:func:`pair_of`):
   not blended (on COIL-20 a cross-fade across the middle seed changed no recognition).
 
 Each pair keeps its own elevation estimate (``elevation="auto"``), from its own flow.
+
+:func:`view_angles` and :func:`seed_pair_poses` go the other way: the angle of a given
+view between two seeds, by Eq. 2 over its correspondences with both.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from torch_eigview.synthesis.seed_pairs import (
     object_geometries,
     pair_geometry,
 )
+from torch_eigview.synthesis.view_pose import seed_pair_poses, view_angles
 from torch_eigview.synthesis.views import SynthesizedViews, pair_of, synthesize_views
 
 __all__ = [
@@ -42,5 +46,7 @@ __all__ = [
     "object_geometries",
     "pair_geometry",
     "pair_of",
+    "seed_pair_poses",
     "synthesize_views",
+    "view_angles",
 ]

@@ -1,0 +1,134 @@
+"""The pose of a view by geometry: ``view_angles`` on rendered turntable views (exact
+angles known) and ``seed_pair_poses``' choice of seed pair, with its neighbour rule and
+the circle's wrap."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from torch_eigview.datasets import OrthographicCamera
+from torch_eigview.datasets.renderer import render_views
+from torch_eigview.datasets.shapes import make_object
+from torch_eigview.synthesis import SynthesisOptions, seed_pair_poses, view_angles
+from torch_eigview.synthesis import view_pose as view_pose_module
+
+
+@pytest.mark.parametrize("name", ["head", "egg"])
+def test_rendered_views_between_the_seeds(name: str) -> None:
+    """Rendered views 5°–25° into a 30° sector come back within a degree, by the default
+    flow (measured: within 0.7° for these shapes)."""
+    obj = make_object(name, seed=1)
+    camera = OrthographicCamera(64)
+    seeds = render_views(obj, [0.0, 30.0], camera)
+    truth = [5.0, 15.0, 25.0]
+    got = view_angles(render_views(obj, truth, camera), seeds, 30.0)
+    assert got.shape == (3,) and got.dtype == torch.float64
+    assert (got - torch.tensor(truth, dtype=torch.float64)).abs().max() < 1.0
+
+
+def test_view_angles_checks_its_arguments() -> None:
+    views = torch.rand(3, 1, 16, 16)
+    with pytest.raises(ValueError, match=r"seeds must have shape \(2, 1, 16, 16\)"):
+        view_angles(views, torch.rand(3, 1, 16, 16), 10.0)
+    with pytest.raises(ValueError, match=r"views must have shape \(N, C, H, W\)"):
+        view_angles(views[0], torch.rand(2, 1, 16, 16), 10.0)
+    with pytest.raises(TypeError, match="views"):
+        view_angles(views.long(), torch.rand(2, 1, 16, 16), 10.0)
+    with pytest.raises(ValueError, match="alpha"):
+        view_angles(views, torch.rand(2, 1, 16, 16), 0.0)
+    assert view_angles(views[:0], torch.rand(2, 1, 16, 16), 10.0).shape == (0,)
+
+
+class _Oracle:
+    """Stands in for view_angles: each "view" is a 1×1 image holding its true pose, and the
+    angle from a pair's first seed (whose image holds the seed's pose) is the difference,
+    taken on the circle (the nearest turn). Records the pairs it was asked about."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[float, int]] = []
+
+    def __call__(
+        self, views: torch.Tensor, seeds: torch.Tensor, alpha: float, options: object = None
+    ) -> torch.Tensor:
+        first = float(seeds[0, 0, 0, 0])
+        self.calls.append((first, views.shape[0]))
+        diff = views[:, 0, 0, 0].double() - first
+        return torch.remainder(diff + 180.0, 360.0) - 180.0
+
+
+def _as_images(poses: list[float]) -> torch.Tensor:
+    return torch.tensor(poses, dtype=torch.float32).view(-1, 1, 1, 1)
+
+
+def test_each_view_goes_to_the_pair_of_its_rough_pose(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Open seeds at 0, 10, 20: a rough pose chooses its sector and the measured angle is
+    added to that pair's first seed; a rough pose before the first seed or past the last
+    is kept (Eq. 2 would extrapolate)."""
+    oracle = _Oracle()
+    monkeypatch.setattr(view_pose_module, "view_angles", oracle)
+    seed_poses = [0.0, 10.0, 20.0]
+    truth = [3.0, 12.0, -8.0, 27.0, 19.0]
+    rough = torch.tensor([4.0, 11.0, -6.0, 25.0, 20.0])
+    got = seed_pair_poses(_as_images(truth), rough, _as_images(seed_poses), seed_poses)
+    torch.testing.assert_close(got, torch.tensor([3.0, 12.0, -6.0, 25.0, 19.0], dtype=torch.float64))
+    assert sorted(oracle.calls) == [(0.0, 1), (10.0, 2)]
+
+
+def test_a_view_outside_its_pair_is_measured_with_the_neighbour(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A rough pose in the wrong sector: Eq. 2 puts the view past the pair's seed, the
+    neighbouring pair on that side measures it, and its pose inside that sector is kept."""
+    oracle = _Oracle()
+    monkeypatch.setattr(view_pose_module, "view_angles", oracle)
+    seed_poses = [0.0, 45.0, 90.0, 135.0]
+    got = seed_pair_poses(_as_images([50.0]), torch.tensor([40.0]), _as_images(seed_poses), seed_poses)
+    assert float(got[0]) == 50.0
+    assert oracle.calls == [(0.0, 1), (45.0, 1)]
+
+
+def test_the_circle_wraps(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Closed seeds round the circle: a rough pose past the last seed belongs to the pair
+    that joins it to the first, and poses come back in [0, 360)."""
+    oracle = _Oracle()
+    monkeypatch.setattr(view_pose_module, "view_angles", oracle)
+    seed_poses = [0.0, 90.0, 180.0, 270.0]
+    truth = [300.0, 355.0, 10.0]
+    rough = torch.tensor([290.0, -10.0, 370.0])
+    got = seed_pair_poses(_as_images(truth), rough, _as_images(seed_poses), seed_poses, closed=True)
+    torch.testing.assert_close(got, torch.tensor(truth, dtype=torch.float64))
+    assert sorted(oracle.calls) == [(0.0, 1), (270.0, 2)]
+
+
+def test_a_view_the_fit_cannot_place_keeps_its_rough_pose(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(
+        view_pose_module, "view_angles", lambda v, s, a, o=None: torch.full((v.shape[0],), math.nan)
+    )
+    got = seed_pair_poses(_as_images([5.0]), torch.tensor([7.5]), _as_images([0.0, 10.0]), [0.0, 10.0])
+    assert float(got[0]) == 7.5
+
+
+@pytest.mark.parametrize(
+    ("seed_poses", "n_seeds", "closed", "match"),
+    [
+        ([0.0, 10.0, 10.0], 3, False, "must increase"),
+        ([0.0, 200.0, 360.0], 3, False, "less than 360"),
+        ([0.0, 10.0], 2, True, "at least 3"),
+        ([0.0, 10.0, 20.0, 30.0], 3, False, "one pose per seed view"),
+    ],
+)
+def test_bad_seed_poses_are_named(seed_poses: list[float], n_seeds: int, closed: bool, match: str) -> None:
+    seeds = _as_images([0.0] * n_seeds)
+    with pytest.raises(ValueError, match=match):
+        seed_pair_poses(_as_images([1.0]), torch.tensor([1.0]), seeds, seed_poses, closed=closed)
+
+
+def test_rough_poses_must_match_the_views() -> None:
+    with pytest.raises(ValueError, match=r"rough must have shape \(2,\)"):
+        seed_pair_poses(_as_images([1.0, 2.0]), torch.tensor([1.0]), _as_images([0.0, 10.0]), [0.0, 10.0])
+    with pytest.raises(ValueError, match="rough"):
+        seed_pair_poses(_as_images([1.0]), torch.tensor([math.nan]), _as_images([0.0, 10.0]), [0.0, 10.0])
+    with pytest.raises(TypeError, match="rough"):
+        seed_pair_poses(_as_images([1.0]), [1.0], _as_images([0.0, 10.0]), [0.0, 10.0])  # type: ignore[arg-type]
+    assert SynthesisOptions().flow == "guided"  # the flow the poses are measured with by default
