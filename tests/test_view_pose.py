@@ -12,7 +12,7 @@ import torch
 from torch_eigview.datasets import OrthographicCamera
 from torch_eigview.datasets.renderer import render_views
 from torch_eigview.datasets.shapes import make_object
-from torch_eigview.synthesis import SynthesisOptions, seed_pair_poses, view_angles
+from torch_eigview.synthesis import seed_pair_poses, view_angles
 from torch_eigview.synthesis import view_pose as view_pose_module
 
 
@@ -27,6 +27,18 @@ def test_rendered_views_between_the_seeds(name: str) -> None:
     got = view_angles(render_views(obj, truth, camera), seeds, 30.0)
     assert got.shape == (3,) and got.dtype == torch.float64
     assert (got - torch.tensor(truth, dtype=torch.float64)).abs().max() < 1.0
+
+
+def test_a_seed_mask_chooses_the_points() -> None:
+    """``seed_mask`` replaces the brightness threshold: an empty mask leaves no point to
+    fit (NaN), and a mask of another shape is named."""
+    obj = make_object("egg", seed=1)
+    camera = OrthographicCamera(32)
+    seeds, views = render_views(obj, [0.0, 30.0], camera), render_views(obj, [15.0], camera)
+    empty = torch.zeros(32, 32, dtype=torch.bool)
+    assert math.isnan(float(view_angles(views, seeds, 30.0, seed_mask=empty)[0]))
+    with pytest.raises(ValueError, match=r"seed_mask must be an \(32, 32\) bool tensor"):
+        view_angles(views, seeds, 30.0, seed_mask=empty[:, :5])
 
 
 def test_view_angles_checks_its_arguments() -> None:
@@ -88,6 +100,27 @@ def test_a_view_outside_its_pair_is_measured_with_the_neighbour(monkeypatch: pyt
     assert oracle.calls == [(0.0, 1), (45.0, 1)]
 
 
+def test_no_pair_places_the_view(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Eq. 2 puts the view before the first of open seeds (no neighbour there), or past a
+    pair whose neighbour does not place it either: the first measurement stands."""
+    oracle = _Oracle()
+    monkeypatch.setattr(view_pose_module, "view_angles", oracle)
+    seed_poses = [0.0, 10.0, 20.0]
+    got = seed_pair_poses(_as_images([-3.0]), torch.tensor([2.0]), _as_images(seed_poses), seed_poses)
+    assert float(got[0]) == -3.0 and oracle.calls == [(0.0, 1)]
+    got = seed_pair_poses(_as_images([45.0]), torch.tensor([5.0]), _as_images(seed_poses), seed_poses)
+    assert float(got[0]) == 45.0 and oracle.calls[1:] == [(0.0, 1), (10.0, 1)]
+
+
+def test_open_seeds_round_most_of_the_circle(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Open seeds spanning more than 180°: a rough pose given on another turn (here −115 for
+    245) is taken on the turn nearest the seeds' middle, inside their span."""
+    monkeypatch.setattr(view_pose_module, "view_angles", _Oracle())
+    seed_poses = [0.0, 100.0, 200.0, 300.0]
+    got = seed_pair_poses(_as_images([250.0]), torch.tensor([-115.0]), _as_images(seed_poses), seed_poses)
+    assert float(got[0]) == 250.0
+
+
 def test_the_circle_wraps(monkeypatch: pytest.MonkeyPatch) -> None:
     """Closed seeds round the circle: a rough pose past the last seed belongs to the pair
     that joins it to the first, and poses come back in [0, 360)."""
@@ -99,6 +132,13 @@ def test_the_circle_wraps(monkeypatch: pytest.MonkeyPatch) -> None:
     got = seed_pair_poses(_as_images(truth), rough, _as_images(seed_poses), seed_poses, closed=True)
     torch.testing.assert_close(got, torch.tensor(truth, dtype=torch.float64))
     assert sorted(oracle.calls) == [(0.0, 1), (270.0, 2)]
+    # Across the wrap: rough in pair 0, the view in pair 3 (and the other way round).
+    oracle.calls.clear()
+    got = seed_pair_poses(
+        _as_images([350.0, 5.0]), torch.tensor([2.0, 355.0]), _as_images(seed_poses), seed_poses, closed=True
+    )
+    torch.testing.assert_close(got, torch.tensor([350.0, 5.0], dtype=torch.float64))
+    assert sorted(oracle.calls) == [(0.0, 1), (0.0, 1), (270.0, 1), (270.0, 1)]
 
 
 def test_a_view_the_fit_cannot_place_keeps_its_rough_pose(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -116,12 +156,18 @@ def test_a_view_the_fit_cannot_place_keeps_its_rough_pose(monkeypatch: pytest.Mo
         ([0.0, 200.0, 360.0], 3, False, "less than 360"),
         ([0.0, 10.0], 2, True, "at least 3"),
         ([0.0, 10.0, 20.0, 30.0], 3, False, "one pose per seed view"),
+        ([0.0, math.nan], 2, False, "must be finite"),
     ],
 )
 def test_bad_seed_poses_are_named(seed_poses: list[float], n_seeds: int, closed: bool, match: str) -> None:
     seeds = _as_images([0.0] * n_seeds)
     with pytest.raises(ValueError, match=match):
         seed_pair_poses(_as_images([1.0]), torch.tensor([1.0]), seeds, seed_poses, closed=closed)
+
+
+def test_seeds_must_match_the_views() -> None:
+    with pytest.raises(ValueError, match=r"seeds must have shape \(V, 1, 1, 1\)"):
+        seed_pair_poses(_as_images([1.0]), torch.tensor([1.0]), torch.zeros(2, 1, 2, 2), [0.0, 10.0])
 
 
 def test_rough_poses_must_match_the_views() -> None:
@@ -131,4 +177,3 @@ def test_rough_poses_must_match_the_views() -> None:
         seed_pair_poses(_as_images([1.0]), torch.tensor([math.nan]), _as_images([0.0, 10.0]), [0.0, 10.0])
     with pytest.raises(TypeError, match="rough"):
         seed_pair_poses(_as_images([1.0]), [1.0], _as_images([0.0, 10.0]), [0.0, 10.0])  # type: ignore[arg-type]
-    assert SynthesisOptions().flow == "guided"  # the flow the poses are measured with by default

@@ -39,6 +39,17 @@ def test_exact_points_give_the_angle(alpha: float) -> None:
     torch.testing.assert_close(got, torch.tensor(thetas, dtype=torch.float64), atol=1e-6, rtol=0)
 
 
+def test_where_the_points_lie_does_not_matter() -> None:
+    """The same points far from column 0 (a wide image) give the same angles: the fit and
+    its degeneracy test work on centred columns."""
+    x1, x2, x3 = _points([5.0, 20.0], 45.0)
+    use = torch.ones_like(x1, dtype=torch.bool)
+    near = fit_view_angle(x1, x2, x3, use, 45.0)
+    far = fit_view_angle(x1 + 2000, x2 + 2000, x3 + 1.2 * 2000, use, 45.0)
+    torch.testing.assert_close(far, near, atol=1e-9, rtol=0)
+    torch.testing.assert_close(near, torch.tensor([5.0, 20.0], dtype=torch.float64), atol=1e-6, rtol=0)
+
+
 def test_mismatches_count_little() -> None:
     """A fifth of the points matched to random columns moves the angle by well under a degree
     (reweighted least squares), where plain least squares would be far off."""
@@ -52,8 +63,9 @@ def test_mismatches_count_little() -> None:
 
 
 def test_points_left_out_and_too_few() -> None:
-    """Points outside ``use`` do not count (here: wild ones), and a view with fewer than
-    MIN_POINTS points, or with every point on one column, gives NaN, never a guess."""
+    """Points outside ``use`` do not count (here: wild ones), non-finite columns neither, and
+    a view with fewer than MIN_POINTS points, or with every point on one column, gives NaN,
+    never a guess; MIN_POINTS points are enough."""
     x1, x2, x3 = _points([12.0, 12.0, 12.0], 30.0)
     use = torch.ones_like(x1, dtype=torch.bool)
     x3 = x3.clone()
@@ -67,6 +79,12 @@ def test_points_left_out_and_too_few() -> None:
     )
     assert abs(float(got[0]) - 12.0) < 1e-6
     assert math.isnan(float(got[1])) and math.isnan(float(got[2]))
+    x1, x2, x3 = _points([12.0], 30.0, n=MIN_POINTS + 1)
+    x3[0, 0] = math.nan
+    got = fit_view_angle(x1, x2, x3, torch.ones_like(x1, dtype=torch.bool), 30.0)
+    assert abs(float(got[0]) - 12.0) < 1e-6
+    short = fit_view_angle(x1[:, :5], x2[:, :5], x3[:, :5], torch.ones(1, 5, dtype=torch.bool), 30.0)
+    assert math.isnan(float(short[0]))
 
 
 def test_bad_arguments_are_named() -> None:
@@ -116,12 +134,17 @@ def test_chain_columns_follows_both_correspondences() -> None:
     # Points land half a row down and 2.5 columns right: those from rows 2, 3 and
     # columns 2, 3 of seed 1 have (3, 5) of view 0 among their four neighbours.
     assert not bool(use[0, 2:4, 2:4].any())
-    assert bool(use[0, :, :-1].sum() == h * (w - 1) - 4)
+    # Landing inside the view: rows up to h - 1.5 (moved down half a row), columns up to
+    # w - 3.5 (moved right 2.5); the last column is not foreground anyway.
+    assert not bool(use[:, -1].any()) and not bool(use[:, :, w - 3 :].any())
+    assert int(use[0].sum()) == (h - 1) * (w - 3) - 4
     assert bool(use[1, 2:4, 2:4].all())
 
 
 def test_chain_columns_checks_its_arguments() -> None:
     c = _corr(torch.zeros(1, 4, 5), torch.ones(1, 4, 5, dtype=torch.bool))
+    with pytest.raises(TypeError, match="to_seed2 must be a Correspondence"):
+        chain_columns(c, None, torch.ones(4, 5, dtype=torch.bool))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="one shape"):
         chain_columns(
             c,

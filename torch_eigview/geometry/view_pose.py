@@ -43,24 +43,31 @@ def fit_view_angle(
 
     Fits ``x3 = a·x1 + b·x2 + e`` per view by iteratively reweighted least squares (Huber
     weights, the scale from the median absolute residual), so mismatched points count
-    little, and returns ``atan2(b sin α, a + b cos α)``.
+    little, and returns ``atan2(b sin α, a + b cos α)``. The columns are centred on their
+    weighted means first (``e`` drops out), so the fit and its degeneracy test do not
+    depend on where in the image the points lie.
+
+    The three views must share one image scale up to a factor on x3: a view scaled on its
+    own (an image normalized to its box) keeps Eq. 2, but a ratio r between the seeds'
+    scales reads as b / r (at α = 45°, θ = 22.5°, r = 1.05 moves θ by about −0.6°).
 
     Args:
         x1, x2, x3: (N, P) columns of P points in seed 1 (at 0), seed 2 (at ``alpha``) and
             the view, per view n.
-        use: (N, P) bool, the points to fit.
+        use: (N, P) bool, the points to fit (non-finite columns are left out).
         alpha: the angle of seed 2 in degrees (not a multiple of 180).
 
     Returns:
-        (N,) float64 angles in degrees from seed 1, in (−180, 180]; NaN for a view with
-        fewer than :data:`MIN_POINTS` points or a degenerate fit (all points on one column).
+        (N,) float64 angles in degrees from seed 1, in [−180, 180]; NaN for a view with
+        fewer than :data:`MIN_POINTS` points, or whose points' x1 and x2 are (nearly)
+        proportional, which leaves a and b undetermined.
 
     Raises:
         TypeError / ValueError: tensors of other shapes or kinds, or a bad ``alpha``.
 
     Example:
-        >>> x1 = torch.tensor([[10.0, 40.0, 70.0, 20.0] * 10])
-        >>> x2 = torch.tensor([[30.0, 35.0, 60.0, 50.0] * 10])
+        >>> x1 = torch.tensor([[10.0, 40.0, 70.0, 20.0] * 10], dtype=torch.float64)
+        >>> x2 = torch.tensor([[30.0, 35.0, 60.0, 50.0] * 10], dtype=torch.float64)
         >>> a, b = math.sin(math.radians(20)) / math.sin(math.radians(30)), math.sin(math.radians(10)) / math.sin(math.radians(30))
         >>> x3 = a * x1 + b * x2 + 5.0
         >>> round(float(fit_view_angle(x1, x2, x3, torch.ones_like(x1, dtype=torch.bool), 30.0)[0]), 6)
@@ -76,26 +83,33 @@ def fit_view_angle(
     shapes = {tuple(v.shape) for v in (*cols, use)}
     if len(shapes) != 1:
         raise ValueError(f"x1, x2, x3 and use must have one shape (N, P), got shapes {sorted(shapes)}")
-    p1, p2, p3 = (torch.where(use, v.double(), 0.0) for v in cols)
-    design = torch.stack([p1, p2, use.double()], dim=-1)  # (N, P, 3)
-    weight = use.double()
-    sol = design.new_zeros(design.shape[0], 3)
+    # A small fit: float64 on the CPU where the device has no float64 (MPS).
+    device = torch.device("cpu") if use.device.type == "mps" else use.device
+    c1, c2, c3 = (v.to(device, torch.float64) for v in cols)
+    use = use.to(device) & c1.isfinite() & c2.isfinite() & c3.isfinite()
+    c1, c2, c3 = (torch.where(use, v, 0.0) for v in (c1, c2, c3))
+    n = use.shape[0]
+    if use.shape[1] < MIN_POINTS:
+        return torch.full((n,), math.nan, dtype=torch.float64, device=device)
     ok = use.sum(dim=1) >= MIN_POINTS
+    weight = use.double()
+    a = b = c1.new_zeros(n)
     for _ in range(_PASSES):
-        wd = design * weight[..., None]
-        normal = wd.transpose(1, 2) @ design  # (N, 3, 3)
-        rhs = (wd * p3[..., None]).sum(dim=1)
-        # A singular system (every point on one column) is no fit: NaN, never a guess.
-        det_ok = torch.linalg.det(normal).abs() > 1e-9 * normal.diagonal(dim1=1, dim2=2).prod(-1).clamp_min(
-            1e-300
+        total = weight.sum(dim=1, keepdim=True).clamp_min(1e-300)
+        d1, d2, d3 = ((v - (weight * v).sum(dim=1, keepdim=True) / total) * use for v in (c1, c2, c3))
+        s11, s22, s12 = ((weight * u * v).sum(dim=1) for u, v in ((d1, d1), (d2, d2), (d1, d2)))
+        s13, s23 = ((weight * u * d3).sum(dim=1) for u in (d1, d2))
+        det = s11 * s22 - s12 * s12
+        # 1 − ρ² of x1 and x2: near 0 they are proportional and (a, b) undetermined. NaN,
+        # never a guess.
+        ok = ok & (det > 1e-9 * s11 * s22) & (s11 > 0) & (s22 > 0)
+        safe = torch.where(ok, det, 1.0)
+        a, b = (s22 * s13 - s12 * s23) / safe, (s11 * s23 - s12 * s13) / safe
+        resid = (d3 - a[:, None] * d1 - b[:, None] * d2).abs()
+        scale = 1.4826 * torch.where(use, resid, math.nan).nanmedian(dim=1).values.nan_to_num(1.0).clamp_min(
+            1e-6
         )
-        ok = ok & det_ok
-        eye = torch.eye(3, dtype=normal.dtype, device=normal.device)
-        sol = torch.linalg.solve(torch.where(ok[:, None, None], normal, eye), rhs)
-        resid = (p3 - (design @ sol[..., None])[..., 0]).abs()
-        scale = 1.4826 * torch.where(use, resid, math.nan).nanmedian(dim=1).values.clamp_min(1e-6)
         weight = torch.where(use, (_HUBER * scale[:, None] / resid.clamp_min(1e-12)).clamp(max=1.0), 0.0)
-    a, b = sol[:, 0], sol[:, 1]
     theta = torch.rad2deg(torch.atan2(b * math.sin(al), a + b * math.cos(al)))
     return torch.where(ok, theta, math.nan)
 
@@ -107,7 +121,8 @@ def chain_columns(
 
     A seed-1 pixel trusted by ``to_view`` is followed into the view (its vertical motion
     included, where the correspondence has one), and ``to_seed2`` is read there, bilinearly
-    (its validity too: a point counts where all four neighbours are trusted).
+    (its validity too: a point counts where all four neighbours are trusted, and only if
+    it lands inside the view).
 
     Args:
         to_view: (N, H, W) correspondences seed 1 → view n.
@@ -121,7 +136,7 @@ def chain_columns(
     Raises:
         TypeError / ValueError: correspondences of other kinds or shapes, a bad mask.
     """
-    to_view, to_seed2 = check_correspondence(to_view), check_correspondence(to_seed2)
+    to_view, to_seed2 = check_correspondence(to_view, "to_view"), check_correspondence(to_seed2, "to_seed2")
     if to_view.shape != to_seed2.shape:
         raise ValueError(
             f"to_view and to_seed2 must have one shape, got {to_view.shape} and {to_seed2.shape}"
@@ -145,7 +160,9 @@ def chain_columns(
     y3 = yy + to_view.vertical_12 if to_view.vertical_12 is not None else yy.expand_as(x3)
     x2 = x3 + _sample(to_seed2.disparity_12, x3, y3)
     trusted = _sample(to_seed2.valid_12.to(d.dtype), x3, y3) > 0.999
-    use = foreground.to(d.device) & to_view.valid_12 & trusted
+    # A point that lands outside the view has no match there (border padding would invent one).
+    inside = (x3 >= 0) & (x3 <= w - 1) & (y3 >= 0) & (y3 <= h - 1)
+    use = foreground.to(d.device) & to_view.valid_12 & trusted & inside
     return xx.expand_as(x3).reshape(n, -1), x2.reshape(n, -1), x3.reshape(n, -1), use.reshape(n, -1)
 
 
