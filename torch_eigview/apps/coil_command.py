@@ -64,10 +64,12 @@ def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     )
     coil.add_argument(
         "--pose",
-        choices=("nearest", "interpolate"),
+        choices=("nearest", "interpolate", "three-view"),
         default="nearest",
-        help="the reported pose: the nearest gallery view's, or interpolated on the appearance "
-        "manifold between it and its neighbours (Murase and Nayar); default nearest",
+        help="the reported pose: the nearest gallery view's, interpolated on the appearance "
+        "manifold between it and its neighbours (Murase and Nayar), or that measured again by "
+        "geometry against the recognized object's seed views (Eq. 2 over two flows per view, "
+        "0.15-0.25 s a view); default nearest",
     )
     coil.add_argument(
         "--dense-step",
@@ -278,7 +280,8 @@ def run_coil(args: argparse.Namespace) -> int:
         gamma=args.gamma,
         seeds=args.seeds,
         dense_step=args.dense_step,
-        interpolate_pose=args.pose == "interpolate",
+        interpolate_pose=args.pose in ("interpolate", "three-view"),
+        three_view_pose=args.pose == "three-view",
         overlap=0.0 if args.overlap is None else args.overlap,
     )
     experiment.worker_kind = _worker_kind(args)

@@ -17,7 +17,7 @@ The COIL experiment (:mod:`torch_eigview.apps.experiment`) and the synthetic one
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -161,6 +161,7 @@ def score(
     *,
     wrap: bool = False,
     interpolate_pose: bool = False,
+    pose_fn: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
 ) -> Score[K]:
     """Recognizes every object's test views and scores them.
 
@@ -173,16 +174,20 @@ def score(
             round a turntable.
         interpolate_pose: the pose interpolated on the appearance manifold
             (``recognizer.predict(..., interpolate_pose=True)``), not the nearest view's.
+        pose_fn: ``(views (T, C, H, W), labels (T,), poses (T,)) → poses (T,)`` that
+            replaces the recognizer's poses (the start it is given), e.g.
+            :class:`~torch_eigview.apps.seed_pose.SeedPoses`.
     """
     per_object: dict[K, float] = {}
     n_ok, n_test, pose_err = 0, 0, []
     for key, label, views, truth in tests:
         result = recognizer.predict(views, interpolate_pose=interpolate_pose)
         ok = result.labels == label
+        poses = result.poses if pose_fn is None else pose_fn(views, result.labels, result.poses)
         per_object[key] = 100.0 * float(ok.double().mean())
         n_ok += int(ok.sum())
         n_test += truth.shape[0]
-        diff = result.poses - truth
+        diff = poses - truth
         pose_err.append((wrap_degrees(diff) if wrap else diff).abs()[ok])
     errors = torch.cat(pose_err)
     return Score(
