@@ -120,7 +120,7 @@ class ChainedExperiment(CoilExperiment):
                     ),
                 )
             else:
-                poses = [self._center + n * self.alpha for n in range(self.views)]
+                poses = self.seed_poses()
                 geometry = chained_geometry(folder, obj, poses, self.synthesis)
                 seeds = self._seeds(folder, obj)
                 yield (

@@ -138,10 +138,9 @@ class CoilExperiment:
             the nearest gallery view and its neighbours
             (:meth:`~torch_eigview.nn.recognition.NearestNeighborRecognizer.interpolate_poses`),
             not the nearest view's pose.
-        three_view_pose: then measure each pose by geometry, starting from the pose above,
-            against the seed views of the object it is recognized as (:class:`~torch_eigview.
-            apps.seed_pose.SeedPoses`, Eq. 2 over two flows per view; 0.15–0.25 s a view on
-            two CPU cores); not with ``seeds=2`` (seeds 180° apart: Eq. 2 is singular).
+        three_view_pose: then measure each pose by geometry from the pose above, against
+            the recognized object's seeds (:class:`~torch_eigview.apps.seed_pose.SeedPoses`,
+            0.14–0.26 s a view on two CPU cores); not with ``seeds=2`` (Eq. 2 is singular).
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
             (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
         workers: workers that synthesize the ``nvs`` galleries, one object each at a time
@@ -250,8 +249,14 @@ class CoilExperiment:
         float32 (1e9 degrees would not)."""
         return wrap_angle(self.center)
 
+    def seed_poses(self, layout: CircleLayout | None = None) -> list[float]:
+        """The seed views' poses in degrees: the full circle's (``layout``), else ``center`` + n·α."""
+        return (
+            layout.seeds if layout is not None else [self._center + n * self.alpha for n in range(self.views)]
+        )
+
     def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
-        return folder.images(obj, [self._center + n * self.alpha for n in range(self.views)])
+        return folder.images(obj, self.seed_poses())
 
     def circle(
         self,
@@ -278,12 +283,11 @@ class CoilExperiment:
         self, folder: CoilFolder, obj: int, layout: CircleLayout | None
     ) -> tuple[torch.Tensor, int, list[float]]:
         """``(views, obj, poses)`` of a gallery of real views (``sparse``, ``dense``)."""
-        c = self._center
         if layout is not None:
             return folder.images(obj, layout.real), obj, layout.real
-        angles = [c + n * self.alpha for n in range(self.views)]
+        angles = self.seed_poses()
         if self.method == "dense":
-            angles = [c + a for a in self.synth_angles(5.0)]
+            angles = [self._center + a for a in self.synth_angles(5.0)]
         return folder.images(obj, angles), obj, angles
 
     def _synthesis_job(
@@ -343,9 +347,10 @@ class CoilExperiment:
         if not objects:
             raise ValueError("objects must name at least one object")
         layout = None if self.seeds is None else self.circle(folder, objects)
+        seeds = self.seed_poses(layout)  # the pose function is built (and checked) before any work
         pose_fn = (
-            SeedPoses.of(self, folder, layout) if self.three_view_pose else None
-        )  # checked before any work
+            SeedPoses(folder, seeds, layout is not None, self.synthesis) if self.three_view_pose else None
+        )
         t_start = time.perf_counter()
         seconds = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0, "recognition": 0.0}
         elevations: dict[int, list[float]] = {}

@@ -175,7 +175,8 @@ def score(
         interpolate_pose: the pose interpolated on the appearance manifold
             (``recognizer.predict(..., interpolate_pose=True)``), not the nearest view's.
         pose_fn: ``(views (T, C, H, W), labels (T,), poses (T,)) → poses (T,)`` that
-            replaces the recognizer's poses (the start it is given), e.g.
+            replaces the recognizer's poses (the start it is given) of the correctly
+            recognized views, the only ones scored; e.g.
             :class:`~torch_eigview.apps.seed_pose.SeedPoses`.
     """
     per_object: dict[K, float] = {}
@@ -183,12 +184,14 @@ def score(
     for key, label, views, truth in tests:
         result = recognizer.predict(views, interpolate_pose=interpolate_pose)
         ok = result.labels == label
-        poses = result.poses if pose_fn is None else pose_fn(views, result.labels, result.poses)
         per_object[key] = 100.0 * float(ok.double().mean())
         n_ok += int(ok.sum())
         n_test += truth.shape[0]
+        poses, truth = result.poses[ok], truth[ok]  # the pose error counts recognized views only
+        if pose_fn is not None and poses.numel():
+            poses = pose_fn(views[ok.to(views.device)], result.labels[ok], poses)
         diff = poses - truth
-        pose_err.append((wrap_degrees(diff) if wrap else diff).abs()[ok])
+        pose_err.append((wrap_degrees(diff) if wrap else diff).abs())
     errors = torch.cat(pose_err)
     return Score(
         accuracy=100.0 * n_ok / n_test,

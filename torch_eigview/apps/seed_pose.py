@@ -5,18 +5,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 
-from torch_eigview.apps.circle import CircleLayout
 from torch_eigview.datasets import CoilFolder
-from torch_eigview.geometry.angles import wrap_angle
 from torch_eigview.synthesis import SynthesisOptions
 from torch_eigview.synthesis.view_pose import seed_pair_poses
-
-if TYPE_CHECKING:
-    from torch_eigview.apps.experiment import CoilExperiment
 
 __all__ = ["SeedPoses"]
 
@@ -44,14 +38,6 @@ class SeedPoses:
                 f"the geometric pose needs at least 3 seeds round the circle, got {len(self.seed_poses)}: "
                 "seeds 180 degrees apart leave Eq. 2 singular"
             )
-
-    @classmethod
-    def of(cls, experiment: CoilExperiment, folder: CoilFolder, layout: CircleLayout | None) -> SeedPoses:
-        """The experiment's seeds: the full circle's (``layout``), else its per-center ones."""
-        if layout is not None:
-            return cls(folder, layout.seeds, True, experiment.synthesis)
-        poses = [wrap_angle(experiment.center) + n * experiment.alpha for n in range(experiment.views)]
-        return cls(folder, poses, False, experiment.synthesis)
 
     def __call__(self, views: torch.Tensor, labels: torch.Tensor, rough: torch.Tensor) -> torch.Tensor:
         """(N,) poses in degrees for (N, C, H, W) ``views``, their (N,) labels and rough poses."""

@@ -22,10 +22,10 @@ from __future__ import annotations
 import math
 
 import torch
-import torch.nn.functional as F
 
 from torch_eigview.check import check_alpha, check_float_tensor, check_ndim
 from torch_eigview.geometry.correspondence import Correspondence, check_correspondence
+from torch_eigview.geometry.tvl1 import warp_by_flow
 
 __all__ = ["MIN_POINTS", "chain_columns", "fit_view_angle"]
 
@@ -156,20 +156,14 @@ def chain_columns(
         torch.arange(w, dtype=d.dtype, device=d.device),
         indexing="ij",
     )
-    x3 = xx + d
-    y3 = yy + to_view.vertical_12 if to_view.vertical_12 is not None else yy.expand_as(x3)
-    x2 = x3 + _sample(to_seed2.disparity_12, x3, y3)
-    trusted = _sample(to_seed2.valid_12.to(d.dtype), x3, y3) > 0.999
+    dy = to_view.vertical_12 if to_view.vertical_12 is not None else torch.zeros_like(d)
+    x3, y3 = xx + d, yy + dy
+    # to_seed2's disparity and validity read at (y3, x3) in one call (border padding).
+    read = warp_by_flow(
+        torch.stack([to_seed2.disparity_12, to_seed2.valid_12.to(d.dtype)], 1), torch.stack([dy, d], 1)
+    )
+    x2, trusted = x3 + read[:, 0], read[:, 1] > 0.999
     # A point that lands outside the view has no match there (border padding would invent one).
     inside = (x3 >= 0) & (x3 <= w - 1) & (y3 >= 0) & (y3 <= h - 1)
     use = foreground.to(d.device) & to_view.valid_12 & trusted & inside
     return xx.expand_as(x3).reshape(n, -1), x2.reshape(n, -1), x3.reshape(n, -1), use.reshape(n, -1)
-
-
-def _sample(field: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """Bilinear samples of (N, H, W) ``field`` at pixel coordinates (N, H, W) (border padding,
-    ``align_corners=True``, the maps' convention)."""
-    _, h, w = field.shape
-    grid = torch.stack([x * (2.0 / max(w - 1, 1)) - 1, y * (2.0 / max(h - 1, 1)) - 1], dim=-1)
-    out = F.grid_sample(field[:, None], grid, mode="bilinear", padding_mode="border", align_corners=True)
-    return out[:, 0]

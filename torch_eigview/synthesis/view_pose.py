@@ -74,8 +74,8 @@ def view_angles(
         raise ValueError(
             f"seed_mask must be an ({h}, {w}) bool tensor, the views' height and width, got {got}"
         )
-    masks = None if seed_mask is None else seed_mask.to(seeds.device)[None].expand(2, h, w)
-    fg = seed_foreground(seeds, masks, opts.background)[0]
+    mask = None if seed_mask is None else seed_mask.to(seeds.device)[None]
+    fg = seed_foreground(seeds[:1], mask, opts.background)[0]
     kwargs = opts.flow_kwargs(alpha / 2)
     s1, s2 = seeds[:1].expand_as(views), seeds[1:].expand_as(views)
     to_view = estimate_correspondence(s1, views, method=opts.flow, threshold=opts.threshold, **kwargs)
