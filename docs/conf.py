@@ -74,13 +74,16 @@ def _data_docstring(app: Sphinx, what: str, name: str, obj: Any, options: Any, l
     if what != "data" or (lines and lines[0].strip() != (type_doc or [""])[0].strip()):
         return
     package, _, attr = name.rpartition(".")
-    for module_name, module in list(sys.modules.items()):
-        if not module_name.startswith(package + ".") or getattr(module, attr, None) is not obj:
-            continue
-        docs = ModuleAnalyzer.for_module(module_name).find_attr_docs().get(("", attr))
-        if docs:
-            lines[:] = docs
-            return
+    # The subpackage's own modules first, then the rest of the package (a constant one
+    # subpackage re-exports from another, ``method.AROUND_SEEDS`` from ``geometry.angles``).
+    for prefix in (package + ".", package.split(".")[0] + "."):
+        for module_name, module in list(sys.modules.items()):
+            if not module_name.startswith(prefix) or getattr(module, attr, None) is not obj:
+                continue
+            docs = ModuleAnalyzer.for_module(module_name).find_attr_docs().get(("", attr))
+            if docs:
+                lines[:] = docs
+                return
     lines[:] = []  # no docstring of its own: the value alone, not tuple's help
 
 

@@ -39,6 +39,7 @@ PUBLIC = [
 SUBPACKAGES = {
     "method": [
         "ALL_COMPONENTS",
+        "AROUND_SEEDS",
         "FewViewEigenspace",
         "calibrate_rejection",
         "resolve_components",

@@ -153,7 +153,7 @@ def test_classifier_synthesizes(dtype: type) -> None:
     X = _views([0.0, 10.0]).astype(dtype)
     y = np.repeat(np.array(SHAPES), 2)
     clf = FewViewRecognizerClassifier(8, image_shape=(1, 32, 32)).fit(X, y, angles=[30.0, 40.0] * 3)
-    assert clf.recognizer_.n_gallery == 3 * 41
+    assert clf.recognizer_.n_gallery == 3 * 51  # 20 degrees before the first seed to 20 past the last
     seeds = torch.from_numpy(X).reshape(3, 2, 1, 32, 32)[[1, 0, 2]]  # classes_ are sorted: egg first
     reference = FewViewEigenspace(8).fit(seeds, [30.0, 40.0])
     assert torch.equal(clf.recognizer_.codes, reference.recognizer_.codes)

@@ -79,6 +79,16 @@ def test_fit_records_preprocessing_labels_and_seeds(model: Path) -> None:
     assert sorted(set(recognizer.poses.tolist())) == [float(a) for a in range(-20, 21, 2)]
 
 
+def test_fit_default_range_reaches_past_both_seeds(views: Path, tmp_path: Path) -> None:
+    """Without --synth: every degree from 20 before the first seed to 20 past the last, recorded."""
+    out = tmp_path / "m.pt"
+    argv = ["fit", "--manifest", str(views), "--seeds", "0", "30", "-k", "4", "--no-reject", "--quiet"]
+    assert main([*argv, "--out", str(out)]) == 0
+    recognizer, meta = load_recognizer(out)
+    assert sorted(set(recognizer.poses.tolist())) == [float(a) for a in range(-20, 51)]
+    assert meta["synth"] == [-20.0, 50.0, 1.0]
+
+
 def test_evaluate_scores_every_view_and_excludes_seeds(
     model: Path, views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

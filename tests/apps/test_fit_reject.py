@@ -53,7 +53,8 @@ def _fit(manifest: Path, out: Path, *extra: str) -> int:
 def test_fit_calibrates_rejection_by_default(known: Path, tmp_path: Path) -> None:
     assert _fit(known, tmp_path / "m.pt") == 0
     recognizer, meta = load_recognizer(tmp_path / "m.pt")
-    assert recognizer.rejects and meta["reject_rate"] == 0.05 and meta["reject_poses"] == [-45.0, 45.0, 2.5]
+    # The default held-out poses: 45 degrees before the first seed (0) to 45 past the last (10).
+    assert recognizer.rejects and meta["reject_rate"] == 0.05 and meta["reject_poses"] == [-45.0, 55.0, 2.5]
     # The held-out views leave the gallery as it is without rejection.
     assert _fit(known, tmp_path / "plain.pt", "--no-reject") == 0
     plain, meta_plain = load_recognizer(tmp_path / "plain.pt")

@@ -13,7 +13,7 @@ from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.errors import NotFittedError
-from torch_eigview.method import ALL_COMPONENTS, FewViewEigenspace, resolve_components
+from torch_eigview.method import ALL_COMPONENTS, AROUND_SEEDS, FewViewEigenspace, resolve_components
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
@@ -44,12 +44,20 @@ def fitted(seeds: torch.Tensor) -> FewViewEigenspace:
 
 
 @pytest.mark.coil
-def test_equals_the_coil_experiment(folder: CoilFolder) -> None:
-    """Objects 1-3 with seeds at 0 and 10 degrees: the same gallery, layer and answers, bit for bit."""
+@pytest.mark.parametrize(
+    ("synth", "coil_synth"),
+    [((-20.0, 20.0, 1.0), (-20.0, 20.0, 1.0)), (AROUND_SEEDS, (-20.0, 30.0, 1.0))],
+    ids=["paper-range", "around-seeds"],
+)
+def test_equals_the_coil_experiment(
+    folder: CoilFolder, synth: tuple[float, float, float] | str, coil_synth: tuple[float, float, float]
+) -> None:
+    """Objects 1-3 with seeds at 0 and 10 degrees: the same gallery, layer and answers, bit
+    for bit, with the paper's range and with the default, 20° past both seeds (−20..30)."""
     objects = [1, 2, 3]
-    reference = CoilExperiment(alpha=10.0, objects=objects).run(folder).recognizer
+    reference = CoilExperiment(alpha=10.0, objects=objects, synth=coil_synth).run(folder).recognizer
     seeds = torch.stack([folder.images(o, [0.0, 10.0]) for o in objects])
-    est = FewViewEigenspace(15).fit(seeds, [0.0, 10.0], labels=objects)
+    est = FewViewEigenspace(15, synth=synth).fit(seeds, [0.0, 10.0], labels=objects)
     for name in ("codes", "labels", "poses"):
         assert torch.equal(getattr(est.recognizer_, name), getattr(reference, name)), name
     assert torch.equal(est.projection_.components, reference.projection.components)
@@ -66,8 +74,9 @@ def test_equals_the_coil_experiment(folder: CoilFolder) -> None:
 
 
 def test_gallery_of_synthesized_views(fitted: FewViewEigenspace, seeds: torch.Tensor) -> None:
-    assert fitted.gallery_labels_.tolist() == [3] * 41 + [5] * 41 + [9] * 41
-    torch.testing.assert_close(fitted.gallery_poses_[:41], torch.arange(-20.0, 21.0))
+    # The default range: every degree from 20 before the first seed (0) to 20 past the last (10).
+    assert fitted.gallery_labels_.tolist() == [3] * 51 + [5] * 51 + [9] * 51
+    torch.testing.assert_close(fitted.gallery_poses_[:51], torch.arange(-20.0, 31.0))
     assert len(fitted.elevations_) == 3 and all(len(e) == 1 for e in fitted.elevations_)
     assert fitted.image_shape_ == (1, 32, 32)
     assert isinstance(fitted.eigenspace_, Eigenspace) and fitted.eigenspace_.n_components_ == 8

@@ -2,8 +2,9 @@
 
 Per object, the views at the seed azimuths (``--seeds 0 10 [more]``, or ``--seeds M``: M
 views 360/M degrees apart from ``--center``) are picked from the manifest, the gallery is
-synthesized from them as ``eigview coil`` does (two seeds: the ``--synth`` range; more: Sec.
-4.1's sectors, the range extended past the last seed; M: the whole circle), and one
+synthesized from them (by default every degree from 20° before the first seed to 20° past
+the last; ``--synth`` as ``eigview coil`` takes it: two seeds, that range; more, Sec. 4.1's
+sectors, the range extended past the last seed; M: the whole circle), and one
 eigenspace and nearest-neighbour gallery are fitted over every object. The model file
 (:func:`~torch_eigview.io.checkpoint.save_recognizer`: checksummed, written atomically) records
 the preprocessing (:class:`~torch_eigview.io.preprocessing.Preprocessing`), the object
@@ -14,10 +15,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import itertools
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
@@ -29,6 +28,14 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
 )
 from torch_eigview.apps.coil_command import add_synthesis_arguments, synthesis_options
+from torch_eigview.apps.seed_plan import (
+    SeedPlan,
+    held_out_thetas,
+    pick_seeds,
+    reject_poses,
+    seed_plan,
+    synth_record,
+)
 from torch_eigview.apps.view_inputs import (
     add_background_arguments,
     add_manifest_arguments,
@@ -44,12 +51,10 @@ if TYPE_CHECKING:
     import torch
 
     from torch_eigview.datasets.background import BackgroundModel
-    from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
+    from torch_eigview.datasets.manifest import ViewEntry
     from torch_eigview.synthesis import SynthesisOptions
 
-__all__ = ["SeedPlan", "add_fit_command", "pick_seeds", "run_fit", "seed_plan"]
-
-_TOL = 1e-6  # degrees: two azimuths this close are one pose
+__all__ = ["add_fit_command", "run_fit"]
 
 
 def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -72,10 +77,12 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--synth",
         type=finite_arg("--synth"),
         nargs=3,
-        default=(-20.0, 20.0, 1.0),
+        default=None,
         metavar=("START", "STOP", "STEP"),
         help="synthesized angles from the first seed for two seeds; each further seed extends the range "
-        "by its step; with --seeds M every STEP degrees round the circle",
+        "by its step; with --seeds M every STEP degrees round the circle (default: every degree from 20 "
+        "before the first seed to 20 past the last, or round the circle; eigview coil's -20 20 1 is the "
+        "paper's protocol)",
     )
     fit.add_argument(
         "--size",
@@ -113,35 +120,15 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--reject-poses",
         type=finite_arg("--reject-poses"),
         nargs=3,
-        default=(-45.0, 45.0, 2.5),
+        default=None,
         metavar=("START", "STOP", "STEP"),
         help="angles from the first seed of the held-out views rejection is calibrated on, the gallery's "
-        "angles left out: where the known objects will be seen (default -45 45 2.5; with --seeds M the "
-        "midpoints between gallery views all round)",
+        "angles left out: where the known objects will be seen (default: every 2.5 degrees from 45 before "
+        "the first seed to 45 past the last; with --seeds M the midpoints between gallery views all round)",
     )
     fit.add_argument("--out", required=True, metavar="FILE", help="the model file to write")
     add_quiet(fit)
     add_threads(fit)
-
-
-@dataclass(frozen=True)
-class SeedPlan:
-    """Where the seed views lie and which angles each object's gallery holds.
-
-    Attributes:
-        azimuths: the seed azimuths in degrees, in [0, 360), in the order of synthesis.
-        first: the first seed's azimuth in (-180, 180], the origin of the gallery's angles.
-        alpha: the angle between consecutive seeds (one number when equal, else Sec. 4.1's α_n).
-        thetas: the gallery angles from the first seed (two or more listed seeds), or None
-            for the full circle (every ``step`` round it).
-        step: the synthesis step in degrees.
-    """
-
-    azimuths: list[float]
-    first: float
-    alpha: float | list[float]
-    thetas: list[float] | None
-    step: float
 
 
 def _rate_arg(text: str) -> float:
@@ -153,102 +140,6 @@ def _rate_arg(text: str) -> float:
     if not 0.0 < value < 1.0:
         raise argparse.ArgumentTypeError(f"--reject-rate must be a number in (0, 1), got {text!r}")
     return value
-
-
-def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, float]) -> SeedPlan:
-    """The seed azimuths and gallery angles of ``--seeds``, ``--center`` and ``--synth``.
-
-    Raises:
-        ValueError: one value that is not an integer >= 3; listed seeds that repeat an
-            azimuth; a bad ``--synth`` range.
-    """
-    from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
-    from torch_eigview.geometry.angles import angle_range, wrap_angle
-
-    start, stop, step = synth
-    angle_range(start, stop, step, "--synth")  # names a bad range before any image is read
-    if len(seeds) == 1:
-        m = seeds[0]
-        if not (m.is_integer() and m >= 3):
-            raise ValueError(
-                f"--seeds {m:g}: one value is M, the number of seed views round the circle, an integer >= 3 "
-                "(M = 2 puts them 180 degrees apart, where Eq. 7's sin(alpha) is 0); or list two or more azimuths"
-            )
-        check_limit(m, "--seeds", "seed views round the circle", *VIEW_LIMIT)
-        azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
-        return SeedPlan(azimuths, wrap_angle(center), 360.0 / m, None, step)
-    steps = [wrap_angle(b - a) for a, b in itertools.pairwise(seeds)]
-    if any(abs(s) < _TOL for s in steps):
-        raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")
-    if any(abs(abs(s) - 180.0) < _TOL for s in steps):
-        raise ValueError(
-            f"--seeds {' '.join(f'{a:g}' for a in seeds)} puts consecutive seeds 180 degrees apart, a multiple "
-            "of 180 where Eq. 7's sin(alpha) is 0: list seeds less than 180 degrees apart"
-        )
-    equal = all(abs(s - steps[0]) < _TOL for s in steps)
-    # Each seed past the second extends the range on its side by its step (as CoilExperiment).
-    extra = (len(steps) - 1) * steps[0] if equal else sum(steps[1:])
-    thetas = angle_range(start + min(extra, 0.0), stop + max(extra, 0.0), step, "--synth")
-    alpha: float | list[float] = steps[0] if equal else steps
-    return SeedPlan([a % 360.0 for a in seeds], wrap_angle(seeds[0]), alpha, thetas, step)
-
-
-def _same_pose(a: float, b: float) -> bool:
-    from torch_eigview.geometry.angles import wrap_angle
-
-    return abs(wrap_angle(a - b)) <= _TOL
-
-
-def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[ViewEntry]:
-    """The views of ``obj`` at ``azimuths`` (degrees), in that order.
-
-    Raises:
-        ValueError: the object has fewer views than seeds, none or several (elevations)
-            at a seed azimuth; the message names the object, the manifest and what it has.
-    """
-    views = manifest.views(obj)
-    have = ", ".join(f"{v.azimuth:g}" for v in views[:24]) + (", ..." if len(views) > 24 else "")
-    if len(views) < len(azimuths):
-        raise ValueError(
-            f"object {obj!r} has {len(views)} view(s) in {manifest.name}, fewer than the {len(azimuths)} "
-            f"seeds: azimuths {have}"
-        )
-    picked = []
-    for az in azimuths:
-        found = [v for v in views if _same_pose(v.azimuth, az)]
-        if not found:
-            raise ValueError(
-                f"object {obj!r} has no view at the seed azimuth {az:g} degrees in {manifest.name}; "
-                f"it has azimuths {have}"
-            )
-        if len(found) > 1:
-            raise ValueError(
-                f"object {obj!r} has {len(found)} views at the seed azimuth {az:g} degrees (other elevations): "
-                f"{', '.join(v.source for v in found)}; list one per azimuth"
-            )
-        picked.append(found[0])
-    return picked
-
-
-def held_out_thetas(plan: SeedPlan, poses: tuple[float, float, float] | None) -> list[float]:
-    """Angles (from the first seed) of the views that calibrate rejection, none a gallery angle.
-
-    Listed seeds: ``angle_range(*poses)`` less the gallery's angles. The full circle: the
-    midpoints between consecutive gallery angles all round (``poses`` unused; only their
-    number matters, the views come from :func:`_gallery`).
-    """
-    from torch_eigview.geometry.angles import angle_range
-
-    if poses is None:
-        return []
-    if plan.thetas is None:
-        return [t + plan.step / 2 for t in angle_range(0.0, 360.0 - plan.step, plan.step, "--synth")]
-    held = [t for t in angle_range(*poses, "--reject-poses") if min(abs(t - g) for g in plan.thetas) > _TOL]
-    if not held:
-        raise ValueError(
-            f"--reject-poses {poses} holds gallery angles only: the views must lie off the gallery"
-        )
-    return held
 
 
 def _gallery(
@@ -315,7 +206,7 @@ def run_fit(args: argparse.Namespace) -> int:
 
     check_outputs([("--out", args.out)], inputs=manifest_inputs(args))
     fields = background_fields(args)
-    plan = seed_plan(list(args.seeds), args.center, tuple(args.synth))
+    plan = seed_plan(list(args.seeds), args.center, None if args.synth is None else tuple(args.synth))
     manifest = load_manifest(args)
     check_not_views([("--out", args.out)], manifest)
     objects = manifest.objects
@@ -334,8 +225,13 @@ def run_fit(args: argparse.Namespace) -> int:
     background = background_model(prep)
     options = synthesis_options(args)
 
-    reject_poses = None if args.reject_rate is None else tuple(args.reject_poses)
-    held = held_out_thetas(plan, reject_poses)
+    given = (
+        None
+        if args.reject_poses is None
+        else (args.reject_poses[0], args.reject_poses[1], args.reject_poses[2])
+    )
+    held_poses = None if args.reject_rate is None else reject_poses(plan, given)
+    held = held_out_thetas(plan, held_poses)
     held_views: list[torch.Tensor] = []
 
     def gallery(obj: str) -> tuple[torch.Tensor, list[float], torch.Tensor]:
@@ -378,10 +274,10 @@ def run_fit(args: argparse.Namespace) -> int:
         "command": "fit",
         "preprocessing": prep.to_json(),
         "seed_azimuths": plan.azimuths,
-        "synth": list(args.synth),
+        "synth": synth_record(args.synth, plan),
         "n_train_views": int(x.shape[0]),
         "reject_rate": args.reject_rate,
-        "reject_poses": None if reject_poses is None else list(reject_poses),
+        "reject_poses": None if held_poses is None else list(held_poses),
         "manifest": manifest.name,
     }
     save_recognizer(args.out, recognizer, meta)

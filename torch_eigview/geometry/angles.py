@@ -9,7 +9,35 @@ import torch
 
 from torch_eigview.check import VIEW_LIMIT, check_alpha, check_limit
 
-__all__ = ["angle_range", "pair_angles", "seed_angles", "wrap_angle", "wrap_degrees"]
+__all__ = [
+    "AROUND_SEEDS",
+    "REJECT_MARGIN",
+    "REJECT_STEP",
+    "SEED_MARGIN",
+    "angle_range",
+    "around_seeds",
+    "off_gallery",
+    "pair_angles",
+    "seed_angles",
+    "wrap_angle",
+    "wrap_degrees",
+]
+
+AROUND_SEEDS = "around-seeds"
+"""``synth``'s default in the fitting APIs (``FewViewEigenspace``, the scikit-learn
+classifier, ``eigview fit``): every degree from 20° before each object's first seed view
+to 20° past its last (:func:`~torch_eigview.geometry.angles.around_seeds`)."""
+
+#: Degrees synthesized past each end seed by default: the paper's 20° (Sec. 5).
+SEED_MARGIN = 20.0
+
+#: Degrees past each end seed of the held-out views that calibrate rejection by default,
+#: every :data:`REJECT_STEP`: 25° past the gallery on both sides, as the paper's −45°..45°
+#: test range lies past its −20°..20° gallery.
+REJECT_MARGIN = 45.0
+
+#: The step of those held-out views, degrees.
+REJECT_STEP = 2.5
 
 
 def wrap_angle(angle: float) -> float:
@@ -54,6 +82,53 @@ def angle_range(start: float, stop: float, step: float, name: str) -> list[float
     check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
     n = int((stop - start) / step + 1e-9) + 1
     return [start + i * step for i in range(n)]
+
+
+def around_seeds(
+    steps: Sequence[float], step: float = 1.0, margin: float = SEED_MARGIN
+) -> tuple[float, float, float]:
+    """``(start, stop, step)`` from ``margin`` degrees before the first seed view to
+    ``margin`` past the last, relative to the first, for seeds ``steps`` apart.
+
+    Nothing tells one end seed from the other, so each is extrapolated past by as much.
+    The paper's range, −20°..20° from the first seed whatever α (``eigview coil``'s
+    protocol), reaches only 20 − α degrees past the second and leaves the second seed out
+    altogether once α > 20°.
+
+    Args:
+        steps: the signed angles from each seed view to the next, degrees (one or more).
+        step: the step of the range, degrees.
+        margin: degrees before the first seed and past the last (default
+            :data:`SEED_MARGIN`; the fitting APIs place their held-out rejection views
+            :data:`REJECT_MARGIN` past them).
+
+    Example:
+        >>> around_seeds([10.0]), around_seeds([-30.0]), around_seeds([10.0, 15.0], 5.0)
+        ((-20.0, 30.0, 1.0), (-50.0, 20.0, 1.0), (-20.0, 45.0, 5.0))
+    """
+    seeds = [0.0]
+    for s in steps:
+        seeds.append(seeds[-1] + float(s))
+    return min(seeds) - margin, max(seeds) + margin, float(step)
+
+
+def off_gallery(poses: tuple[float, float, float], gallery: Sequence[float], name: str) -> list[float]:
+    """The angles of ``angle_range(*poses)`` that are no gallery angle (1e-6 degrees apart,
+    round the circle: 190 is the gallery's −170): where held-out views calibrate rejection.
+
+    Raises:
+        ValueError: none is left, or a bad range; the message names ``name``.
+
+    Example:
+        >>> off_gallery((-10.0, 10.0, 5.0), [0.0, 365.0], "reject_poses")  # 365 is 5
+        [-10.0, -5.0, 10.0]
+    """
+    held = [t for t in angle_range(*poses, name) if min(abs(wrap_angle(t - g)) for g in gallery) > 1e-6]
+    if not held:
+        raise ValueError(
+            f"{name} {poses} holds gallery angles only: the held-out views must lie off the gallery"
+        )
+    return held
 
 
 def pair_angles(alpha: object, n_seeds: int) -> list[float]:

@@ -26,7 +26,7 @@ from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.decomposition.streaming import StreamingEigenspace
 from torch_eigview.errors import NotFittedError
-from torch_eigview.geometry.angles import angle_range
+from torch_eigview.geometry.angles import AROUND_SEEDS, REJECT_MARGIN, REJECT_STEP, around_seeds, off_gallery
 from torch_eigview.method.inputs import (
     Params,
     block_item,
@@ -59,8 +59,11 @@ class FewViewEigenspace:
     Args:
         n_components: eigenspace dimension k (int), energy fraction (float in (0, 1)), or
             None for every component above rounding (:data:`ALL_COMPONENTS`).
-        synth: (start, stop, step) of the synthesized angles in degrees, relative to each
-            object's first seed view, for two seeds (see ``synth_follows_seeds``); None
+        synth: the synthesized angles: ``"around-seeds"`` (default,
+            :data:`~torch_eigview.geometry.angles.AROUND_SEEDS`), every degree from 20°
+            before each object's first seed view to 20° past its last; or (start, stop,
+            step) in degrees relative to the first seed view, for two seeds (see
+            ``synth_follows_seeds``; ``(-20, 20, 1)`` is the paper's protocol); None
             fits the seed views alone (the ``sparse`` baseline of the experiments). At
             most 3600 views per object (environment variable ``EIGVIEW_MAX_VIEWS``).
         options: :class:`~torch_eigview.synthesis.SynthesisOptions` (flow, elevation,
@@ -69,7 +72,7 @@ class FewViewEigenspace:
         kernel: None for the linear eigenspace (the paper's), or a
             :class:`~torch_eigview.decomposition.kernel.KernelEigenspace` kernel name.
         gamma: the kernel's γ (a number, "median" for rbf, or None: 1/N).
-        synth_follows_seeds: with more than two seeds, extend ``synth`` on the seeds'
+        synth_follows_seeds: with more than two seeds, extend a (start, stop, step) ``synth`` on the seeds'
             side by the steps past the first pair (as ``CoilExperiment``).
         max_views: the most gallery views :meth:`fit_blocks` holds at once.
         reject_rate: None (no rejection), or the fraction in (0, 1) of known views one
@@ -78,10 +81,11 @@ class FewViewEigenspace:
             is a good start. Needs ``synth``.
         reject_score: the rejection score, ``"difs"`` (distance to the nearest gallery
             view; the best on COIL-20), ``"dffs"`` or ``"both"``.
-        reject_poses: (start, stop, step) in degrees, relative to each object's first
-            seed, of the held-out views: the poses at which known objects are to be met
-            (the threshold grows with how far they lie past the gallery); poses that are
-            gallery poses are left out.
+        reject_poses: the held-out views' poses, where known objects are to be met (the
+            threshold grows with how far they lie past the gallery): ``"around-seeds"``
+            (default), every 2.5° from 45° before each object's first seed view to 45°
+            past its last (25° past the default gallery on both sides), or (start, stop,
+            step) in degrees relative to the first seed view; gallery poses are left out.
 
     Example:
         >>> seeds = torch.rand(2, 2, 1, 16, 16)  # 2 objects, seed views at 0 and 10 degrees
@@ -94,7 +98,7 @@ class FewViewEigenspace:
         self,
         n_components: int | float | None = 15,
         *,
-        synth: tuple[float, float, float] | None = (-20.0, 20.0, 1.0),
+        synth: tuple[float, float, float] | str | None = AROUND_SEEDS,
         options: SynthesisOptions | None = None,
         unit_norm: bool = True,
         kernel: str | None = None,
@@ -103,7 +107,7 @@ class FewViewEigenspace:
         max_views: int = 4096,
         reject_rate: float | None = None,
         reject_score: str = "difs",
-        reject_poses: tuple[float, float, float] = (-45.0, 45.0, 2.5),
+        reject_poses: tuple[float, float, float] | str = AROUND_SEEDS,
     ) -> None:
         self.n_components = n_components
         self.synth = synth
@@ -133,7 +137,7 @@ class FewViewEigenspace:
             raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
         return Params(
             n_components,
-            check_synth(self.synth),
+            check_synth(self.synth, around=True),
             self.options or SynthesisOptions(),
             self.unit_norm,
             self.kernel,
@@ -142,13 +146,16 @@ class FewViewEigenspace:
             check_int(self.max_views, "max_views", 1),
         )
 
-    def _reject_params(self, synth: object) -> tuple[float, str, tuple[float, float, float]] | None:
+    def _reject_params(self, synth: object) -> tuple[float, str, tuple[float, float, float] | str] | None:
         if self.reject_rate is None:
             return None
         rate = check_reject_rate(self.reject_rate)
         score = check_choice(self.reject_score, "reject_score", REJECT_SCORES)
-        poses = check_synth(self.reject_poses, "reject_poses")
-        assert poses is not None
+        poses = check_synth(self.reject_poses, "reject_poses", around=True)
+        if poses is None:
+            raise ValueError(
+                f"reject_poses must be (start, stop, step) in degrees or {AROUND_SEEDS!r}, got None"
+            )
         if synth is None:
             raise ValueError(
                 f"reject_rate={rate} calibrates on synthesized views: it needs synth, got synth=None "
@@ -163,8 +170,8 @@ class FewViewEigenspace:
         """Synthesizes every object's gallery from its seed views and fits on all of them.
 
         Memory: the gallery views twice (P × N, and their unit-norm copy) plus the P×P
-        Gram matrix, P the gallery's views (41 per object for two seeds at the default
-        ``synth``); :meth:`fit_blocks` fits without holding them.
+        Gram matrix, P the gallery's views (per object, 51 for two seeds 10° apart at
+        the default ``synth``: −20..30); :meth:`fit_blocks` fits without holding them.
 
         Args:
             seeds: (O, V, C, H, W) seed views of O objects, or a sequence of O
@@ -223,12 +230,13 @@ class FewViewEigenspace:
         angles: list[list[float]],
         labels: list[int],
         masks: list[torch.Tensor | None],
-        held_poses: tuple[float, float, float] | None = None,
+        held_poses: tuple[float, float, float] | str | None = None,
         held_out: list[torch.Tensor] | None = None,
     ) -> Iterator[Gallery]:
         """Per object its gallery views, label and poses; appends its elevations to
         ``elevations_``, and to ``held_out`` its views synthesized at ``held_poses`` (start,
-        stop, step) that are not gallery poses (in the same call, from the same geometry)."""
+        stop, step, or :data:`AROUND_SEEDS`) that are not gallery poses (in the same call,
+        from the same geometry)."""
         for views, seed_angles, label, mask in zip(objects, angles, labels, masks, strict=True):
             if params.synth is None:
                 yield views, label, seed_angles
@@ -240,7 +248,10 @@ class FewViewEigenspace:
             steps = seed_steps(seed_angles)
             alpha: float | list[float] = steps[0] if len(set(steps)) == 1 else steps
             thetas = params.thetas(steps)
-            held = [] if held_poses is None else _held_out_thetas(held_poses, thetas)
+            # AROUND_SEEDS: this object's seeds, 45 degrees past them, every 2.5.
+            around = around_seeds(steps, REJECT_STEP, REJECT_MARGIN)
+            poses_o = around if isinstance(held_poses, str) else held_poses
+            held = [] if poses_o is None else off_gallery(poses_o, thetas, "reject_poses")
             out = synthesize_views(views, alpha, thetas + held, params.options, masks=mask)
             self.elevations_.append(out.elevations)
             if held_out is not None:
@@ -366,13 +377,3 @@ class FewViewEigenspace:
         if isinstance(self.eigenspace_, KernelEigenspace):
             return self.eigenspace_.to_module(unit_norm=unit)
         return self.eigenspace_.to_module(unit_norm=unit, image_shape=self.image_shape_)
-
-
-def _held_out_thetas(poses: tuple[float, float, float], gallery: list[float]) -> list[float]:
-    """The angles of ``angle_range(*poses)`` that are not gallery angles (1e-6 degrees apart)."""
-    held = [t for t in angle_range(*poses, "reject_poses") if min(abs(t - g) for g in gallery) > 1e-6]
-    if not held:
-        raise ValueError(
-            f"reject_poses={poses} holds gallery poses only: the held-out views must lie off the gallery"
-        )
-    return held

@@ -25,7 +25,7 @@ from torch_eigview.check import (
     check_ndim,
     check_number,
 )
-from torch_eigview.geometry.angles import angle_range, wrap_degrees
+from torch_eigview.geometry.angles import AROUND_SEEDS, angle_range, around_seeds, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
 from torch_eigview.warp.normalize import FILLED_FRAME, box_fill, foreground_mask, seed_foreground
 
@@ -63,7 +63,7 @@ class Params:
     """The hyperparameters of :class:`FewViewEigenspace`, validated."""
 
     n_components: int | float
-    synth: tuple[float, float, float] | None
+    synth: tuple[float, float, float] | str | None
     options: SynthesisOptions
     unit_norm: bool
     kernel: str | None
@@ -72,10 +72,14 @@ class Params:
     max_views: int
 
     def thetas(self, steps: list[float]) -> list[float]:
-        """Gallery angles relative to the first seed, for seeds ``steps`` apart (as
-        ``CoilExperiment.synth_angles``: each seed past the second extends the range on
-        its side by its step, when ``synth_follows_seeds``)."""
+        """Gallery angles relative to the first seed, for seeds ``steps`` apart: with
+        :data:`AROUND_SEEDS` every degree from 20° before the first seed to 20° past the
+        last (:func:`~torch_eigview.geometry.angles.around_seeds`); with (start, stop,
+        step) that range (as ``CoilExperiment.synth_angles``: each seed past the second
+        extends it on its side by its step, when ``synth_follows_seeds``)."""
         assert self.synth is not None
+        if isinstance(self.synth, str):
+            return angle_range(*around_seeds(steps), "synth")
         start, stop, step = self.synth
         if self.synth_follows_seeds:
             extra = (len(steps) - 1) * steps[0] if len(set(steps)) == 1 else sum(steps[1:])
@@ -83,13 +87,16 @@ class Params:
         return angle_range(start, stop, step, "synth")
 
 
-def check_synth(synth: object, name: str = "synth") -> tuple[float, float, float] | None:
-    """None, or (start, stop, step) finite degrees with step > 0 and start <= stop; the
-    messages name the argument ``name``."""
-    if synth is None:
-        return None
+def check_synth(
+    synth: object, name: str = "synth", *, around: bool = False
+) -> tuple[float, float, float] | str | None:
+    """None, (start, stop, step) finite degrees with step > 0 and start <= stop, or, with
+    ``around``, :data:`AROUND_SEEDS`; the messages name the argument ``name``."""
+    if synth is None or (around and isinstance(synth, str) and synth == AROUND_SEEDS):
+        return synth
     if not isinstance(synth, Sequence) or isinstance(synth, str) or len(synth) != 3:
-        raise ValueError(f"{name} must be (start, stop, step) in degrees, got {synth!r}")
+        also = f", {AROUND_SEEDS!r} or None" if around else ""
+        raise ValueError(f"{name} must be (start, stop, step) in degrees{also}, got {synth!r}")
     start, stop, step = (check_number(v, f"{name}[{i}]") for i, v in enumerate(synth))
     if not all(math.isfinite(v) for v in (start, stop, step)):
         raise ValueError(f"{name} must hold finite angles, got {synth!r}")

@@ -13,6 +13,7 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 
 from torch_eigview.check import check_image_shape, check_number
+from torch_eigview.geometry.angles import AROUND_SEEDS
 from torch_eigview.method import FewViewEigenspace
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
@@ -86,7 +87,8 @@ class FewViewRecognizerClassifier(ClassifierMixin, BaseEstimator):
     must span less than a half turn for the warp (``synthesize_views``); seeds that
     span more, e.g. all around the object, are fitted as consecutive runs that each
     span less than 180° and share their end seeds, every run synthesizing its own
-    views over ``synth``. A label needs two rows or more to synthesize from. The default
+    views over ``synth`` (the default extrapolates 20° past each run's end seeds, so
+    neighbouring runs overlap there). A label needs two rows or more to synthesize from. The default
     ``options`` size-normalize each synthesized view as COIL's processed images are
     (``extent``): rows not normalized that way want ``SynthesisOptions(extent=False)``.
 
@@ -118,7 +120,7 @@ class FewViewRecognizerClassifier(ClassifierMixin, BaseEstimator):
         *,
         image_shape: tuple[int, int, int] | None = None,
         alpha: float = 10.0,
-        synth: tuple[float, float, float] | None = (-20.0, 20.0, 1.0),
+        synth: tuple[float, float, float] | str | None = AROUND_SEEDS,
         options: SynthesisOptions | None = None,
         unit_norm: bool = True,
         kernel: str | None = None,

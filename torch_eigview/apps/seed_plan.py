@@ -1,0 +1,162 @@
+"""Where ``eigview fit``'s seed views lie and which angles each object's gallery holds.
+
+:func:`seed_plan` turns ``--seeds``, ``--center`` and ``--synth`` into a :class:`SeedPlan`
+(listed seeds: the gallery angles; ``--seeds M``: the full circle), :func:`pick_seeds`
+finds the seed views in a manifest, :func:`held_out_thetas` places the views that
+calibrate rejection, and :func:`synth_record` is the gallery range the model file records.
+Nothing here imports torch at import time (``eigview predict --onnx`` runs without it).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
+
+__all__ = ["SeedPlan", "held_out_thetas", "pick_seeds", "reject_poses", "seed_plan", "synth_record"]
+
+_TOL = 1e-6  # degrees: two azimuths this close are one pose
+
+
+@dataclass(frozen=True)
+class SeedPlan:
+    """Where the seed views lie and which angles each object's gallery holds.
+
+    Attributes:
+        azimuths: the seed azimuths in degrees, in [0, 360), in the order of synthesis.
+        first: the first seed's azimuth in (-180, 180], the origin of the gallery's angles.
+        alpha: the angle between consecutive seeds (one number when equal, else Sec. 4.1's α_n).
+        thetas: the gallery angles from the first seed (two or more listed seeds), or None
+            for the full circle (every ``step`` round it).
+        step: the synthesis step in degrees.
+        steps: the signed angles from each listed seed to the next (empty for the circle).
+    """
+
+    azimuths: list[float]
+    first: float
+    alpha: float | list[float]
+    thetas: list[float] | None
+    step: float
+    steps: list[float] = field(default_factory=list)
+
+
+def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, float] | None) -> SeedPlan:
+    """The seed azimuths and gallery angles of ``--seeds``, ``--center`` and ``--synth``
+    (None: every degree from 20° before the first seed to 20° past the last,
+    :func:`~torch_eigview.geometry.angles.around_seeds`).
+
+    Raises:
+        ValueError: one value that is not an integer >= 3; listed seeds that repeat an
+            azimuth; a bad ``--synth`` range.
+    """
+    from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
+    from torch_eigview.geometry.angles import angle_range, around_seeds, wrap_angle
+
+    start, stop, step = synth or (0.0, 0.0, 1.0)
+    angle_range(start, stop, step, "--synth")  # names a bad range before any image is read
+    if len(seeds) == 1:
+        m = seeds[0]
+        if not (m.is_integer() and m >= 3):
+            raise ValueError(
+                f"--seeds {m:g}: one value is M, the number of seed views round the circle, an integer >= 3 "
+                "(M = 2 puts them 180 degrees apart, where Eq. 7's sin(alpha) is 0); or list two or more azimuths"
+            )
+        check_limit(m, "--seeds", "seed views round the circle", *VIEW_LIMIT)
+        azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
+        return SeedPlan(azimuths, wrap_angle(center), 360.0 / m, None, step)
+    steps = [wrap_angle(b - a) for a, b in itertools.pairwise(seeds)]
+    if any(abs(s) < _TOL for s in steps):
+        raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")
+    if any(abs(abs(s) - 180.0) < _TOL for s in steps):
+        raise ValueError(
+            f"--seeds {' '.join(f'{a:g}' for a in seeds)} puts consecutive seeds 180 degrees apart, a multiple "
+            "of 180 where Eq. 7's sin(alpha) is 0: list seeds less than 180 degrees apart"
+        )
+    equal = all(abs(s - steps[0]) < _TOL for s in steps)
+    if synth is None:
+        thetas = angle_range(*around_seeds(steps), "--synth")
+    else:
+        # Each seed past the second extends the range on its side by its step (as CoilExperiment).
+        extra = (len(steps) - 1) * steps[0] if equal else sum(steps[1:])
+        thetas = angle_range(start + min(extra, 0.0), stop + max(extra, 0.0), step, "--synth")
+    alpha: float | list[float] = steps[0] if equal else steps
+    return SeedPlan([a % 360.0 for a in seeds], wrap_angle(seeds[0]), alpha, thetas, step, steps)
+
+
+def synth_record(synth: list[float] | None, plan: SeedPlan) -> list[float]:
+    """The model's record of the gallery range: ``--synth`` as given, else the default's
+    (start, stop, step) from the first seed (every ``step`` round the circle)."""
+    if synth is not None:
+        return [float(v) for v in synth]
+    if plan.thetas is None:
+        return [0.0, 360.0 - plan.step, plan.step]
+    return [plan.thetas[0], plan.thetas[-1], plan.step]
+
+
+def _same_pose(a: float, b: float) -> bool:
+    from torch_eigview.geometry.angles import wrap_angle
+
+    return abs(wrap_angle(a - b)) <= _TOL
+
+
+def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[ViewEntry]:
+    """The views of ``obj`` at ``azimuths`` (degrees), in that order.
+
+    Raises:
+        ValueError: the object has fewer views than seeds, none or several (elevations)
+            at a seed azimuth; the message names the object, the manifest and what it has.
+    """
+    views = manifest.views(obj)
+    have = ", ".join(f"{v.azimuth:g}" for v in views[:24]) + (", ..." if len(views) > 24 else "")
+    if len(views) < len(azimuths):
+        raise ValueError(
+            f"object {obj!r} has {len(views)} view(s) in {manifest.name}, fewer than the {len(azimuths)} "
+            f"seeds: azimuths {have}"
+        )
+    picked = []
+    for az in azimuths:
+        found = [v for v in views if _same_pose(v.azimuth, az)]
+        if not found:
+            raise ValueError(
+                f"object {obj!r} has no view at the seed azimuth {az:g} degrees in {manifest.name}; "
+                f"it has azimuths {have}"
+            )
+        if len(found) > 1:
+            raise ValueError(
+                f"object {obj!r} has {len(found)} views at the seed azimuth {az:g} degrees (other elevations): "
+                f"{', '.join(v.source for v in found)}; list one per azimuth"
+            )
+        picked.append(found[0])
+    return picked
+
+
+def reject_poses(plan: SeedPlan, given: tuple[float, float, float] | None) -> tuple[float, float, float]:
+    """``--reject-poses`` as given, else every 2.5° from 45° before the first listed seed to
+    45° past the last (25° past the default gallery on both sides); for the full circle,
+    where the held-out views are the midpoints between gallery views, those midpoints'
+    range."""
+    from torch_eigview.geometry.angles import REJECT_MARGIN, REJECT_STEP, around_seeds
+
+    if plan.thetas is None:
+        return (plan.step / 2, 360.0 - plan.step / 2, plan.step)
+    return given or around_seeds(plan.steps, REJECT_STEP, REJECT_MARGIN)
+
+
+def held_out_thetas(plan: SeedPlan, poses: tuple[float, float, float] | None) -> list[float]:
+    """Angles (from the first seed) of the views that calibrate rejection, none a gallery angle.
+
+    Listed seeds: ``angle_range(*poses)`` less the gallery's angles, round the circle. The
+    full circle: the midpoints between consecutive gallery angles all round (``poses``
+    unused; only their number matters, the views come from ``fit_command``'s gallery).
+    None: no rejection, no views.
+    """
+    from torch_eigview.geometry.angles import angle_range, off_gallery
+
+    if poses is None:
+        return []
+    if plan.thetas is None:
+        return [t + plan.step / 2 for t in angle_range(0.0, 360.0 - plan.step, plan.step, "--synth")]
+    return off_gallery(poses, plan.thetas, "--reject-poses")
