@@ -177,3 +177,15 @@ def test_rough_poses_must_match_the_views() -> None:
         seed_pair_poses(_as_images([1.0]), torch.tensor([math.nan]), _as_images([0.0, 10.0]), [0.0, 10.0])
     with pytest.raises(TypeError, match="rough"):
         seed_pair_poses(_as_images([1.0]), [1.0], _as_images([0.0, 10.0]), [0.0, 10.0])  # type: ignore[arg-type]
+
+
+def test_column_weight_is_the_horizontal_derivative() -> None:
+    """A pixel's weight: how much its row varies there (both channels' mean), 0 where flat
+    and in the first and last column; a vertical edge weighs, a horizontal one does not."""
+    image = torch.zeros(2, 4, 6)
+    image[:, :, 3:] = 1.0  # a vertical edge between columns 2 and 3
+    image[1, 2:, :] += 0.5  # a horizontal edge in channel 1 alone
+    w = view_pose_module._column_weight(image).view(4, 6)
+    torch.testing.assert_close(w[:, 2], torch.full((4,), 0.5))
+    torch.testing.assert_close(w[:, 3], torch.full((4,), 0.5))
+    assert (w[:, [0, 1, 4, 5]] == 0).all()

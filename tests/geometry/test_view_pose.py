@@ -102,6 +102,37 @@ def test_bad_arguments_are_named() -> None:
         fit_view_angle(x, x, x, use, 180.0)
 
 
+def test_prior_weights() -> None:
+    """Uniform weights change nothing; weights that favour the well-measured points move
+    the angle onto them (half the points shifted by a bias the Huber weights cannot tell
+    from the truth); a point of weight 0 is left out, so too few weighted points give NaN;
+    a bad weight is named."""
+    thetas = [8.0, 30.0]
+    x1, x2, x3 = _points(thetas, 45.0)
+    use = torch.ones_like(x1, dtype=torch.bool)
+    plain = fit_view_angle(x1, x2, x3, use, 45.0)
+    torch.testing.assert_close(fit_view_angle(x1, x2, x3, use, 45.0, weight=torch.full((400,), 3.0)), plain)
+    # Half the points biased towards seed 1 (x3 pulled 30 % of the way back to x1).
+    biased = torch.arange(400) % 2 == 0
+    x3b = torch.where(biased, x3 + 0.3 * (1.2 * x1 + 3.0 - x3), x3)
+    unweighted = fit_view_angle(x1, x2, x3b, use, 45.0)
+    weighted = fit_view_angle(x1, x2, x3b, use, 45.0, weight=(~biased).double() * 5 + biased.double() * 0.01)
+    truth = torch.tensor(thetas, dtype=torch.float64)
+    assert ((weighted - truth).abs() < (unweighted - truth).abs()).all()
+    assert (weighted - truth).abs().max() < 0.3
+    few = torch.zeros(400)
+    few[: MIN_POINTS - 1] = 1.0
+    assert fit_view_angle(x1, x2, x3, use, 45.0, weight=few).isnan().all()
+    with pytest.raises(ValueError, match=r"weight must have shape \(2, 400\) or \(400,\), got \(399,\)"):
+        fit_view_angle(x1, x2, x3, use, 45.0, weight=torch.ones(399))
+    with pytest.raises(ValueError, match="weight must be finite and non-negative"):
+        fit_view_angle(x1, x2, x3, use, 45.0, weight=-torch.ones(400))
+    with pytest.raises(ValueError, match="weight must be finite and non-negative"):
+        fit_view_angle(x1, x2, x3, use, 45.0, weight=torch.full((2, 400), math.nan))
+    with pytest.raises(TypeError, match="weight"):
+        fit_view_angle(x1, x2, x3, use, 45.0, weight=torch.ones(400, dtype=torch.int64))
+
+
 def _corr(
     disparity: torch.Tensor, valid: torch.Tensor, vertical: torch.Tensor | None = None
 ) -> Correspondence:

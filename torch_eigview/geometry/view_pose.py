@@ -37,7 +37,12 @@ _HUBER, _PASSES = 2.0, 10
 
 
 def fit_view_angle(
-    x1: torch.Tensor, x2: torch.Tensor, x3: torch.Tensor, use: torch.Tensor, alpha: float
+    x1: torch.Tensor,
+    x2: torch.Tensor,
+    x3: torch.Tensor,
+    use: torch.Tensor,
+    alpha: float,
+    weight: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """The angle θ of each view from the columns of its points in both seeds and in it.
 
@@ -56,6 +61,9 @@ def fit_view_angle(
             the view, per view n.
         use: (N, P) bool, the points to fit (non-finite columns are left out).
         alpha: the angle of seed 2 in degrees (not a multiple of 180).
+        weight: optional (N, P) or (P,) non-negative prior weights of the points (how well
+            their columns are measured), multiplying the Huber weights; a point of weight
+            0 is left out.
 
     Returns:
         (N,) float64 angles in degrees from seed 1, in [−180, 180]; NaN for a view with
@@ -83,16 +91,21 @@ def fit_view_angle(
     shapes = {tuple(v.shape) for v in (*cols, use)}
     if len(shapes) != 1:
         raise ValueError(f"x1, x2, x3 and use must have one shape (N, P), got shapes {sorted(shapes)}")
+    prior = None if weight is None else _check_weight(weight, use.shape)
     # A small fit: float64 on the CPU where the device has no float64 (MPS).
     device = torch.device("cpu") if use.device.type == "mps" else use.device
     c1, c2, c3 = (v.to(device, torch.float64) for v in cols)
     use = use.to(device) & c1.isfinite() & c2.isfinite() & c3.isfinite()
+    if prior is not None:
+        prior = prior.to(device, torch.float64).expand(use.shape)
+        use = use & (prior > 0)
     c1, c2, c3 = (torch.where(use, v, 0.0) for v in (c1, c2, c3))
     n = use.shape[0]
     if use.shape[1] < MIN_POINTS:
         return torch.full((n,), math.nan, dtype=torch.float64, device=device)
     ok = use.sum(dim=1) >= MIN_POINTS
-    weight = use.double()
+    base = use.double() if prior is None else torch.where(use, prior, 0.0)
+    weight = base
     a = b = c1.new_zeros(n)
     for _ in range(_PASSES):
         total = weight.sum(dim=1, keepdim=True).clamp_min(1e-300)
@@ -109,9 +122,20 @@ def fit_view_angle(
         scale = 1.4826 * torch.where(use, resid, math.nan).nanmedian(dim=1).values.nan_to_num(1.0).clamp_min(
             1e-6
         )
-        weight = torch.where(use, (_HUBER * scale[:, None] / resid.clamp_min(1e-12)).clamp(max=1.0), 0.0)
+        weight = base * (_HUBER * scale[:, None] / resid.clamp_min(1e-12)).clamp(max=1.0)
     theta = torch.rad2deg(torch.atan2(b * math.sin(al), a + b * math.cos(al)))
     return torch.where(ok, theta, math.nan)
+
+
+def _check_weight(weight: object, shape: torch.Size) -> torch.Tensor:
+    """``weight`` of :func:`fit_view_angle`: a finite non-negative float tensor of shape
+    (N, P) or (P,)."""
+    w = check_float_tensor(weight, "weight")
+    if tuple(w.shape) not in (tuple(shape), tuple(shape[1:])):
+        raise ValueError(f"weight must have shape {tuple(shape)} or ({shape[1]},), got {tuple(w.shape)}")
+    if not bool(torch.isfinite(w).all()) or bool((w < 0).any()):
+        raise ValueError("weight must be finite and non-negative")
+    return w
 
 
 def chain_columns(
