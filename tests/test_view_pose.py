@@ -41,6 +41,26 @@ def test_a_seed_mask_chooses_the_points() -> None:
         view_angles(views, seeds, 30.0, seed_mask=empty[:, :5])
 
 
+def test_view_angles_weights_the_points_by_seed_1s_texture(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The fit gets seed 1's column weight: where seed 1 does not vary along any row no
+    point counts (NaN), and the weight is seed 1's, not the view's."""
+    obj = make_object("egg", seed=1)
+    camera = OrthographicCamera(32)
+    seeds, views = render_views(obj, [0.0, 30.0], camera), render_views(obj, [15.0], camera)
+    seen: list[torch.Tensor] = []
+    real = view_pose_module._column_weight
+
+    def spy(image: torch.Tensor) -> torch.Tensor:
+        seen.append(image)
+        return real(image)
+
+    monkeypatch.setattr(view_pose_module, "_column_weight", spy)
+    assert abs(float(view_angles(views, seeds, 30.0)[0]) - 15.0) < 1.0
+    assert len(seen) == 1 and torch.equal(seen[0], seeds[0])
+    monkeypatch.setattr(view_pose_module, "_column_weight", lambda image: torch.zeros(32 * 32))
+    assert math.isnan(float(view_angles(views, seeds, 30.0)[0]))
+
+
 def test_view_angles_checks_its_arguments() -> None:
     views = torch.rand(3, 1, 16, 16)
     with pytest.raises(ValueError, match=r"seeds must have shape \(2, 1, 16, 16\)"):

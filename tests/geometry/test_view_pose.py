@@ -112,6 +112,10 @@ def test_prior_weights() -> None:
     use = torch.ones_like(x1, dtype=torch.bool)
     plain = fit_view_angle(x1, x2, x3, use, 45.0)
     torch.testing.assert_close(fit_view_angle(x1, x2, x3, use, 45.0, weight=torch.full((400,), 3.0)), plain)
+    # Any scale of the weights: the same angles (no overflow or underflow in the sums).
+    w = torch.rand(400, generator=torch.Generator().manual_seed(2), dtype=torch.float64) + 0.1
+    for scale in (1e-200, 1.0, 1e150):
+        torch.testing.assert_close(fit_view_angle(x1, x2, x3, use, 45.0, weight=w * scale), plain)
     # Half the points biased towards seed 1 (x3 pulled 30 % of the way back to x1).
     biased = torch.arange(400) % 2 == 0
     x3b = torch.where(biased, x3 + 0.3 * (1.2 * x1 + 3.0 - x3), x3)

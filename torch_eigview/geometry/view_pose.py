@@ -99,6 +99,8 @@ def fit_view_angle(
     if prior is not None:
         prior = prior.to(device, torch.float64).expand(use.shape)
         use = use & (prior > 0)
+        # Scaled to at most 1 per view: the sums below neither overflow nor underflow.
+        prior = prior / prior.amax(dim=1, keepdim=True).clamp_min(1e-300)
     c1, c2, c3 = (torch.where(use, v, 0.0) for v in (c1, c2, c3))
     n = use.shape[0]
     if use.shape[1] < MIN_POINTS:

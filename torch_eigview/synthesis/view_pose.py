@@ -50,7 +50,8 @@ def view_angles(
 
     Returns:
         (N,) float64 angles in degrees from seed 1; NaN where a view has too few trusted
-        points (:data:`~torch_eigview.geometry.view_pose.MIN_POINTS`) or a degenerate fit
+        points (:data:`~torch_eigview.geometry.view_pose.MIN_POINTS`; a point where seed 1
+        does not vary along its row does not count) or a degenerate fit
         (:func:`~torch_eigview.geometry.view_pose.fit_view_angle`).
 
     Raises:
@@ -96,7 +97,7 @@ def _column_weight(image: torch.Tensor) -> torch.Tensor:
         image: (C, H, W) the view whose pixels are followed (seed 1).
     """
     gx = torch.zeros_like(image)
-    gx[:, :, 1:-1] = (image[:, :, 2:] - image[:, :, :-2]).abs() / 2
+    gx[:, :, 1:-1] = (image[:, :, 2:] / 2 - image[:, :, :-2] / 2).abs()  # halved first: no overflow
     return gx.mean(dim=0).reshape(-1)
 
 
