@@ -225,11 +225,7 @@ def run_fit(args: argparse.Namespace) -> int:
     background = background_model(prep)
     options = synthesis_options(args)
 
-    given = (
-        None
-        if args.reject_poses is None
-        else (args.reject_poses[0], args.reject_poses[1], args.reject_poses[2])
-    )
+    given = None if args.reject_poses is None else tuple(args.reject_poses)
     held_poses = None if args.reject_rate is None else reject_poses(plan, given)
     held = held_out_thetas(plan, held_poses)
     held_views: list[torch.Tensor] = []

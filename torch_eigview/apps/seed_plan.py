@@ -55,8 +55,9 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
     from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
     from torch_eigview.geometry.angles import angle_range, around_seeds, wrap_angle
 
-    start, stop, step = synth or (0.0, 0.0, 1.0)
-    angle_range(start, stop, step, "--synth")  # names a bad range before any image is read
+    step = 1.0 if synth is None else synth[2]
+    if synth is not None:
+        angle_range(*synth, "--synth")  # names a bad range before any image is read
     if len(seeds) == 1:
         m = seeds[0]
         if not (m.is_integer() and m >= 3):
@@ -81,7 +82,7 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
     else:
         # Each seed past the second extends the range on its side by its step (as CoilExperiment).
         extra = (len(steps) - 1) * steps[0] if equal else sum(steps[1:])
-        thetas = angle_range(start + min(extra, 0.0), stop + max(extra, 0.0), step, "--synth")
+        thetas = angle_range(synth[0] + min(extra, 0.0), synth[1] + max(extra, 0.0), step, "--synth")
     alpha: float | list[float] = steps[0] if equal else steps
     return SeedPlan([a % 360.0 for a in seeds], wrap_angle(seeds[0]), alpha, thetas, step, steps)
 
@@ -138,11 +139,11 @@ def reject_poses(plan: SeedPlan, given: tuple[float, float, float] | None) -> tu
     45° past the last (25° past the default gallery on both sides); for the full circle,
     where the held-out views are the midpoints between gallery views, those midpoints'
     range."""
-    from torch_eigview.geometry.angles import REJECT_MARGIN, REJECT_STEP, around_seeds
+    from torch_eigview.geometry.angles import held_out_range
 
     if plan.thetas is None:
         return (plan.step / 2, 360.0 - plan.step / 2, plan.step)
-    return given or around_seeds(plan.steps, REJECT_STEP, REJECT_MARGIN)
+    return given or held_out_range(plan.steps)
 
 
 def held_out_thetas(plan: SeedPlan, poses: tuple[float, float, float] | None) -> list[float]:

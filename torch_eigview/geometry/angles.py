@@ -16,6 +16,7 @@ __all__ = [
     "SEED_MARGIN",
     "angle_range",
     "around_seeds",
+    "held_out_range",
     "off_gallery",
     "pair_angles",
     "seed_angles",
@@ -110,6 +111,18 @@ def around_seeds(
     for s in steps:
         seeds.append(seeds[-1] + float(s))
     return min(seeds) - margin, max(seeds) + margin, float(step)
+
+
+def held_out_range(steps: Sequence[float]) -> tuple[float, float, float]:
+    """The default poses of the held-out views that calibrate rejection, for seeds
+    ``steps`` apart: every :data:`REJECT_STEP` degrees from :data:`REJECT_MARGIN` before
+    the first seed to as far past the last (:func:`around_seeds`).
+
+    Example:
+        >>> held_out_range([10.0])
+        (-45.0, 55.0, 2.5)
+    """
+    return around_seeds(steps, REJECT_STEP, REJECT_MARGIN)
 
 
 def off_gallery(poses: tuple[float, float, float], gallery: Sequence[float], name: str) -> list[float]:

@@ -26,7 +26,7 @@ from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.decomposition.streaming import StreamingEigenspace
 from torch_eigview.errors import NotFittedError
-from torch_eigview.geometry.angles import AROUND_SEEDS, REJECT_MARGIN, REJECT_STEP, around_seeds, off_gallery
+from torch_eigview.geometry.angles import AROUND_SEEDS, held_out_range, off_gallery
 from torch_eigview.method.inputs import (
     Params,
     block_item,
@@ -248,9 +248,7 @@ class FewViewEigenspace:
             steps = seed_steps(seed_angles)
             alpha: float | list[float] = steps[0] if len(set(steps)) == 1 else steps
             thetas = params.thetas(steps)
-            # AROUND_SEEDS: this object's seeds, 45 degrees past them, every 2.5.
-            around = around_seeds(steps, REJECT_STEP, REJECT_MARGIN)
-            poses_o = around if isinstance(held_poses, str) else held_poses
+            poses_o = held_out_range(steps) if isinstance(held_poses, str) else held_poses  # AROUND_SEEDS
             held = [] if poses_o is None else off_gallery(poses_o, thetas, "reject_poses")
             out = synthesize_views(views, alpha, thetas + held, params.options, masks=mask)
             self.elevations_.append(out.elevations)
