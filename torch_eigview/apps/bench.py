@@ -312,7 +312,8 @@ def _section_coil100(results: dict[str, Any], quick: bool) -> None:
     c = results["coil100"] = bench_coil100(n, 1025, explicit=not quick)
     print(
         f"\n== COIL-100 sized build: {n} objects x 41 views x 3x128x128 synthetic (exact: panels of 1025 views;"
-        " pipeline: flow + synthesis of every object into a disk cache, then the exact Gram from it)"
+        " pipeline: flow + synthesis of every object into a disk cache, then StreamingEigenspace's default"
+        " method from it)"
     )
     print(
         _table(c, [*_SCALING_COLS, ("workers", "workers", "d"), ("workers MiB", "workers_peak_mib", ".0f")])

@@ -1,7 +1,7 @@
 """Scaling cases of the benchmark, each measured in a fresh subprocess: time and peak memory.
 
 :func:`smooth_views` generates the synthetic views; :func:`bench_scaling` and
-:func:`bench_coil100` run each case (explicit, streaming exact or randomized fit, or the
+:func:`bench_coil100` run each case (explicit, streaming exact, subspace or randomized fit, or the
 whole build with flow and synthesis) through ``python -m torch_eigview.apps.bench --worker
 SPEC`` so that its peak resident set (:class:`_PeakRss`) is its own.
 """
@@ -153,7 +153,8 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
         t0 = time.perf_counter()
         if kind == "pipeline":
             # The whole build: per object flow + 41 synthesized views (two seeds 5 px apart),
-            # stored once in a disk cache, then the exact Gram by panels from the cache.
+            # stored once in a disk cache, then the eigenspace from the cache by the default
+            # method (the subspace iteration at this size, one pass per iteration).
             # Objects go to ``workers`` processes or threads (one torch thread each), results
             # come back in order.
             from torch_eigview.scale.parallel import synthesize_objects
@@ -171,7 +172,8 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
                         cache.append(synth.views)
                 extra["synthesis_s"] = time.perf_counter() - t0
                 with for_products(flops) as n_threads:
-                    space = StreamingEigenspace(k, method="exact", max_views=spec["max_views"]).fit(cache)
+                    space = StreamingEigenspace(k, max_views=spec["max_views"]).fit(cache)
+                extra["method"] = space.method_
                 passes = space.n_passes_
         elif kind == "explicit":
             with for_products(flops) as n_threads:
@@ -209,8 +211,10 @@ def _measure(spec: dict[str, Any]) -> dict[str, Any]:
     # Views a streaming fit holds at once: the exact Gram path a panel plus a chunk of later
     # views, the scatter path a chunk of N/2 views, the randomized one a block.
     max_views = result["max_views"]
-    if result["kind"] in ("exact", "pipeline"):
+    if result["kind"] == "exact" or result.get("method") == "exact":
         held = min(max_views, n) + min(CHUNK_VIEWS, max_views, n) if n < features else features // 2
+    elif result["kind"] in ("subspace", "pipeline"):
+        held = min(CHUNK_VIEWS, n)  # a chunk of centred views
     else:
         held = 41 if result["kind"] == "randomized" else 0
     result["panel_mib"] = held * features * 4 / 2**20
@@ -241,11 +245,13 @@ def bench_scaling(
 
 
 def bench_coil100(n_objects: int, panel: int, explicit: bool) -> list[dict[str, Any]]:
-    """COIL-100-sized builds: the eigen step alone (explicit / exact / randomized on
-    generated views) and ``pipeline``, the whole build with flow and synthesis."""
+    """COIL-100-sized builds: the eigen step alone (explicit / exact / subspace / randomized
+    on generated views) and ``pipeline``, the whole build with flow and synthesis."""
     from torch_eigview.scale.parallel import available_cpus
 
-    kinds = ("explicit", "exact", "randomized") if explicit else ("exact", "randomized")
+    kinds = (
+        ("explicit", "exact", "subspace", "randomized") if explicit else ("exact", "subspace", "randomized")
+    )
     spec = dict(objects=n_objects, size=128, channels=3, k=15, max_views=panel)
     rows = [_measure(dict(spec, kind=k)) for k in kinds]
     # The whole build in this process (torch's threads), over one process per CPU and over

@@ -13,10 +13,38 @@ import torch
 from torch_eigview.check import check_choice, check_finite, check_image_shape, check_int, check_magnitude
 from torch_eigview.decomposition._fitted import DTYPES, FittedEigenspace, views_to_fit
 from torch_eigview.decomposition.linalg import EigenFit, centred_k, gram, leading_eigenpairs
+from torch_eigview.decomposition.subspace import OVERSAMPLE, leading_by_subspace
 
-__all__ = ["Eigenspace"]
+__all__ = ["SUBSPACE_MIN", "Eigenspace", "exact_solver", "pick_solver"]
 
-_SOLVERS = ("auto", "gram", "covariance", "svd")
+_SOLVERS = ("auto", "gram", "covariance", "svd", "subspace")
+
+#: "auto" takes "subspace" for an int k once P and N are both at least this: there the
+#: Gram (or scatter) matrix costs about P·N·min(P, N) multiply-adds against 4·P·N·l per
+#: iteration (l = k + oversample = 50 at k = 15), so at this size about 12 iterations cost
+#: what it does, while image galleries converge in 6–9 (2026-12-02, the M = 8 gallery).
+SUBSPACE_MIN = 2048
+
+
+def exact_solver(n_views: int, n_features: int) -> str:
+    """ "gram" when N > P, else "covariance": the smaller of the two products."""
+    return "gram" if n_features > n_views else "covariance"
+
+
+def pick_solver(n_components: int | float, solver: str, n_views: int, n_features: int) -> str:
+    """The solver that runs for P × N views: ``solver``, or the one "auto" picks.
+
+    Raises:
+        ValueError: "subspace" with a fractional ``n_components``.
+    """
+    if solver == "subspace" and not isinstance(n_components, int):
+        raise ValueError(f"solver='subspace' needs an int n_components (k), got {n_components!r}")
+    if solver != "auto":
+        return solver
+    small = min(n_views, n_features)
+    if isinstance(n_components, int) and small >= SUBSPACE_MIN and n_components + OVERSAMPLE <= small:
+        return "subspace"
+    return exact_solver(n_views, n_features)
 
 
 def _check_sparse(t: object, name: str, layout: str) -> torch.Tensor:
@@ -59,18 +87,25 @@ class Eigenspace(FittedEigenspace):
     tolerance (:func:`~torch_eigview.decomposition.linalg.rank_tolerance`: the product's
     ``max(λ) * sqrt(max(P, N)) * eps(dtype)`` or the centring's rounding) are dropped, and
     each component's entry of largest magnitude is made positive, so results do not depend
-    on the solver's signs.
+    on the solver's signs. ``solver_`` is the solver that ran ("auto"'s choice, and "gram" or
+    "covariance" where "subspace" handed over to it).
 
     Args:
         n_components: k as an int >= 1, or a float in (0, 1): the energy fraction, giving
             the smallest k with sum_{i<=k} λ_i / sum_i λ_i >= fraction (the paper uses 0.99).
         solver: "gram" eigen-decomposes the P×P Gram matrix Xc Xcᵀ and maps its eigenvectors
             V to components (Xcᵀ V) / sqrt(λ); "covariance" the N×N matrix Xcᵀ Xc; "svd" runs
-            ``torch.linalg.svd`` on Xc; "auto" picks "gram" when N > P, else "covariance".
+            ``torch.linalg.svd`` on Xc; "subspace" iterates a block of k + 35 vectors
+            (:func:`~torch_eigview.decomposition.subspace.subspace_eigenpairs`, an int
+            ``n_components`` only) until the k leading eigenpairs converge, falling back
+            to "gram" / "covariance" where they do not within the products those cost;
+            "auto" picks "subspace" for an int ``n_components`` when P and N are both at
+            least :data:`SUBSPACE_MIN` (2048), else "gram" when N > P, else "covariance".
 
     Raises:
         TypeError: ``n_components`` is not a number (bool included) or ``solver`` not a str.
-        ValueError: ``n_components`` or ``solver`` is out of range.
+        ValueError: ``n_components`` or ``solver`` is out of range; at fit, "subspace"
+            with a fractional ``n_components``.
 
     Example:
         >>> X = torch.randn(20, 64, dtype=torch.float64)
@@ -79,6 +114,7 @@ class Eigenspace(FittedEigenspace):
     """
 
     _FIT_CALLS = "fit or fit_sparse"
+    solver_: str  # set by a fit
 
     def __init__(self, n_components: int | float = 15, *, solver: str = "auto") -> None:
         super().__init__(n_components)
@@ -168,9 +204,18 @@ class Eigenspace(FittedEigenspace):
         dtype = x.dtype
         mean = x.mean(dim=0)
         xc = x - mean
-        solver = self.solver
-        if solver == "auto":
-            solver = "gram" if n_features > n_views else "covariance"
+        solver = pick_solver(self.n_components, self.solver, n_views, n_features)
+        if solver == "subspace":
+            found = self._subspace(xc, mean, name)
+            self.solver_ = "subspace"
+            if found is not None:
+                eigvals, components, total = found
+                self._state = EigenFit.from_eigenpairs(
+                    mean, components, eigvals, total, n_views, image_shape, dtype
+                )
+                return xc
+            solver = exact_solver(n_views, n_features)
+        self.solver_ = solver
 
         # The small symmetric eigenproblem runs in float64 (eigh is cheap at that size and
         # float32 eigenvectors of a nearly degenerate spectrum are poor); products stay in
@@ -189,3 +234,27 @@ class Eigenspace(FittedEigenspace):
                 components = (components @ xc) / eigvals.sqrt().to(dtype)[:, None]
         self._state = EigenFit.from_eigenpairs(mean, components, eigvals, total, n_views, image_shape, dtype)
         return xc
+
+    def _subspace(
+        self, xc: torch.Tensor, mean: torch.Tensor, name: str
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+        """Eigenvalues (k,), components (k, N) and trace of the centred (P, N) views ``xc``
+        by subspace iteration, or None where it did not converge (or k + oversample exceeds
+        P or N): the exact path takes over."""
+        n_views, n_features = xc.shape
+        k = self.n_components
+        assert isinstance(k, int), "pick_solver admits subspace for an int k only"
+
+        def products(v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            w = xc @ v
+            return w, xc.T @ w
+
+        found = leading_by_subspace(products, k, n_views, n_features, xc.dtype, xc.device)
+        if found is None:
+            return None
+        eigvals, components = found
+        # trace(Xc Xcᵀ) = ‖Xc‖², the sum of all eigenvalues: row norms (one long float32 sum
+        # over all P·N values drifts by percents), summed in float64.
+        total = torch.linalg.vector_norm(xc, dim=1).double().square().sum()
+        k = centred_k(k, eigvals, total, mean, n_views, xc.dtype, name)
+        return eigvals[:k], components[:k], total

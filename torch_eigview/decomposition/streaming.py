@@ -5,7 +5,8 @@ source: a callable that returns a fresh iterable of blocks each time it is calle
 blocks are synthesized again, or read again from disk), a sequence of tensors, or one
 tensor split into row blocks. Every pass over the source must yield the same views.
 
-Two methods, both bounded in memory:
+Three methods, all bounded in memory (``"auto"``, the default, takes ``"subspace"`` where
+:class:`~torch_eigview.decomposition.eigenspace.Eigenspace`'s "auto" would, else ``"exact"``):
 
 - ``"exact"``: pass 1 folds the views into their mean (float64 sums). When N <= P the
   N×N scatter matrix Σ_b (B_b − μ)ᵀ(B_b − μ) is accumulated in one more pass, blocks
@@ -23,6 +24,11 @@ Two methods, both bounded in memory:
   Σ_b (B_b − μ)ᵀ Ω_b, each power iteration Y ← Xcᵀ (Xc Q) is one pass (per block
   Z_b = (B_b − μ) Q, Y += (B_b − μ)ᵀ Z_b), and a last pass forms Z = Xc Q (P × l), whose
   SVD gives the components. Memory: a block plus N·l plus P·l; 3 + ``n_iter`` passes.
+- ``"subspace"``: after the mean, block subspace iteration until the k leading eigenpairs
+  converge (:func:`~torch_eigview.decomposition.subspace.subspace_eigenpairs`, an int k):
+  each iteration is one pass, W_b = (B_b − μ) V and Y += (B_b − μ)ᵀ W_b, blocks gathered
+  into chunks of up to 256 views. Memory: a chunk plus N·l plus P·l (l = k + 35). Where it
+  does not converge within what the exact products cost, ``"exact"`` takes over.
 
 ``fit_transform`` projects the views block by block in one pass more. The linear algebra
 is :mod:`torch_eigview.decomposition.linalg`'s, shared with ``Eigenspace``.
@@ -38,18 +44,21 @@ import torch
 from torch_eigview.check import check_int
 from torch_eigview.decomposition._fitted import FittedEigenspace
 from torch_eigview.decomposition._stream import BlockSource, Stream, blocks_of, stream_mean
+from torch_eigview.decomposition.eigenspace import pick_solver
 from torch_eigview.decomposition.linalg import (
     EigenFit,
+    centred_k,
     gram,
     leading_eigenpairs,
     randomized_passes,
     sketch_components,
     sketch_matrix,
 )
+from torch_eigview.decomposition.subspace import leading_by_subspace
 
 __all__ = ["BlockSource", "StreamingEigenspace", "blocks_of"]
 
-_METHODS = ("exact", "randomized")
+_METHODS = ("auto", "exact", "subspace", "randomized")
 _NAME = "the streamed views"  # the fitted views, as the errors name them
 CHUNK_VIEWS = 256  # views per cross-product GEMM of the exact Gram path
 
@@ -59,12 +68,17 @@ class StreamingEigenspace(FittedEigenspace):
 
     The fitted attributes, ``transform``, ``inverse_transform`` and ``to_module`` are those
     of :class:`~torch_eigview.decomposition.eigenspace.Eigenspace`, which the exact method
-    equals on the stacked views.
+    equals on the stacked views (the subspace method to its tolerance); ``method_`` is the
+    method that ran ("exact" where the subspace iteration handed over to it), and
+    ``n_passes_`` the passes over the source.
 
     Args:
         n_components: k (int >= 1) or an energy fraction in (0, 1).
         method: ``"exact"`` (mean, then the N×N scatter or the P×P Gram matrix by panels;
-            equals ``Eigenspace`` on the stacked views) or ``"randomized"`` (range finder).
+            equals ``Eigenspace`` on the stacked views), ``"subspace"`` (subspace iteration
+            converged to the k leading eigenpairs, an int k), ``"auto"`` (``"subspace"``
+            where ``Eigenspace``'s "auto" takes it, else ``"exact"``) or ``"randomized"``
+            (range finder, a fixed number of passes).
         max_views: the most views the exact Gram path holds at once (a panel), >= 1.
         oversample: extra random directions of the randomized method (l = k + oversample).
         n_iter: power iterations of the randomized method.
@@ -77,12 +91,13 @@ class StreamingEigenspace(FittedEigenspace):
     """
 
     _FIT_CALLS = "fit or fit_transform"
+    method_: str  # set by a fit
 
     def __init__(
         self,
         n_components: int | float = 15,
         *,
-        method: str = "exact",
+        method: str = "auto",
         max_views: int = 4096,
         oversample: int = 10,
         n_iter: int = 2,
@@ -150,12 +165,19 @@ class StreamingEigenspace(FittedEigenspace):
             assert stream.n_views is not None and stream.dtype is not None
             if stream.n_views < 2:
                 raise ValueError(f"blocks must hold at least 2 views in all, got P={stream.n_views}")
-            if self.method == "randomized":
+            method = self.method
+            if method in ("auto", "subspace"):
+                method = pick_solver(self.n_components, method, stream.n_views, mean64.numel())
+            fit = self._subspace(stream, mean64) if method == "subspace" else None
+            if fit is None and method == "randomized":
                 fit = self._randomized(stream, mean64)
-            elif mean64.numel() <= stream.n_views:
-                fit = self._exact_covariance(stream, mean64)
-            else:
-                fit = self._exact_gram(stream, mean64)
+            elif fit is None:  # exact, or the subspace iteration did not converge
+                exact = self._exact_covariance if mean64.numel() <= stream.n_views else self._exact_gram
+                passes = self.n_passes_ - 1 if method == "subspace" else 0  # its mean pass is shared
+                fit = exact(stream, mean64)
+                self.n_passes_ += passes
+                method = "exact"
+            self.method_ = method
         self._state = fit
         return fit
 
@@ -233,6 +255,53 @@ class StreamingEigenspace(FittedEigenspace):
         stream.check_result(comp, "the components")
         self.n_passes_ = 2 + len(panels)
         return self._record(stream, mean64, comp / eigvals.sqrt()[:, None], eigvals, total)
+
+    # ------------------------------------------------------------------ subspace
+    def _subspace(self, stream: Stream, mean64: torch.Tensor) -> EigenFit | None:
+        """The fit by subspace iteration, one pass per iteration, or None where it does not
+        converge within the budget (the exact path takes over)."""
+        assert stream.n_views is not None and stream.dtype is not None
+        mean = mean64.to(stream.dtype)
+        p, n = stream.n_views, mean.numel()
+        k = self.n_components
+        assert isinstance(k, int), "pick_solver admits subspace for an int k only"
+        self.n_passes_ = 1  # the mean's
+        norms = torch.zeros(p, dtype=torch.float64, device=mean.device)
+
+        def products(v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            w = mean.new_empty(p, v.shape[1])
+            y = torch.zeros(n, v.shape[1], dtype=torch.float64, device=mean.device)
+
+            def emit(start: int, chunk: torch.Tensor) -> None:
+                part = torch.matmul(chunk, v, out=w[start : start + chunk.shape[0]])
+                y.add_((chunk.T @ part).double())
+                if self.n_passes_ == 1:  # the first iteration: ‖Xc‖² by rows, as Eigenspace
+                    norms[start : start + chunk.shape[0]] = torch.linalg.vector_norm(chunk, dim=1).double()
+
+            self._centred_chunks(stream, mean, emit)
+            stream.check_result(w, "the products Xc V")
+            self.n_passes_ += 1
+            return w, y
+
+        found = leading_by_subspace(products, k, p, n, stream.dtype, mean.device)
+        if found is None:
+            return None
+        eigvals, components = found
+        total = norms.square().sum()
+        k = centred_k(k, eigvals, total, mean64, p, stream.dtype, _NAME)
+        return self._record(stream, mean64, components[:k], eigvals[:k], total)
+
+    @staticmethod
+    def _centred_chunks(
+        stream: Stream, mean: torch.Tensor, emit: Callable[[int, torch.Tensor], object]
+    ) -> None:
+        """One pass: every block centred, gathered into chunks of up to CHUNK_VIEWS views."""
+        chunks = _Chunks(mean, CHUNK_VIEWS, emit)
+        start = 0
+        for b in stream:
+            chunks.add(start, b)
+            start += b.shape[0]
+        chunks.close()
 
     # ------------------------------------------------------------------ randomized
     def _randomized(self, stream: Stream, mean64: torch.Tensor) -> EigenFit:
