@@ -19,11 +19,15 @@ __all__ = ["SUBSPACE_MIN", "Eigenspace", "exact_solver", "pick_solver"]
 
 _SOLVERS = ("auto", "gram", "covariance", "svd", "subspace")
 
-#: "auto" takes "subspace" for an int k once P and N are both at least this: there the
-#: Gram (or scatter) matrix costs about P·N·min(P, N) multiply-adds against 4·P·N·l per
-#: iteration (l = k + oversample = 50 at k = 15), so at this size about 12 iterations cost
-#: what it does, while image galleries converge in 6–9 (2026-12-02, the M = 8 gallery).
-SUBSPACE_MIN = 2048
+#: "auto" takes "subspace" for an int k once P and N are both at least this. The Gram
+#: matrix by panels costs about 1.25·P²·N flops against 4·P·N·l per iteration (l = k + 35
+#: = 50 at k = 15), so at this size the iteration's budget, half the exact cost, is about
+#: 12 iterations, and an iteration stopped at its third (a spectrum without a gap) adds
+#: about an eighth to the exact time. Chosen from two measurements (2026-12-02): COIL-20
+#: galleries converge in 6–7 iterations (the M = 8 gallery, 7,200 × 16,384: 6, in 1.8–2.6 s
+#: against 9.4–11.2 s), while 100 random smooth textures (4,100 × 49,152) would need about
+#: 20 and are stopped at the third.
+SUBSPACE_MIN = 4096
 
 
 def exact_solver(n_views: int, n_features: int) -> str:
@@ -100,7 +104,7 @@ class Eigenspace(FittedEigenspace):
             ``n_components`` only) until the k leading eigenpairs converge, falling back
             to "gram" / "covariance" where they do not within the products those cost;
             "auto" picks "subspace" for an int ``n_components`` when P and N are both at
-            least :data:`SUBSPACE_MIN` (2048), else "gram" when N > P, else "covariance".
+            least :data:`SUBSPACE_MIN` (4096), else "gram" when N > P, else "covariance".
 
     Raises:
         TypeError: ``n_components`` is not a number (bool included) or ``solver`` not a str.
