@@ -148,7 +148,8 @@ def test_errors_and_rank() -> None:
 
 def test_streaming_subspace_matches_the_explicit_fit(monkeypatch: pytest.MonkeyPatch) -> None:
     """One pass per iteration over 41-view blocks gathered into chunks: the eigenspace of
-    the stacked views, and "auto" takes it where ``Eigenspace``'s "auto" would."""
+    the stacked views; "auto" takes it where ``Eigenspace``'s "auto" would, and the
+    default is "exact"."""
     calls = _spy(monkeypatch)
     x = make_views(410, 500)
     blocks = list(x.split(41))
@@ -163,9 +164,11 @@ def test_streaming_subspace_matches_the_explicit_fit(monkeypatch: pytest.MonkeyP
     assert calls == [1] and got.n_passes_ >= 3  # the mean, then at least two iterations
     assert got.method_ == "subspace"
     monkeypatch.setattr(eigenspace, "SUBSPACE_MIN", 60)
-    StreamingEigenspace(8).fit(blocks)
+    assert StreamingEigenspace(8).fit(blocks).method_ == "exact"  # the default
+    assert calls == [1]
+    StreamingEigenspace(8, method="auto").fit(blocks)
     assert calls == [1, 1]
-    StreamingEigenspace(0.9).fit(blocks)
+    StreamingEigenspace(0.9, method="auto").fit(blocks)
     assert calls == [1, 1]
     with pytest.raises(ValueError, match="solver='subspace' needs an int n_components"):
         StreamingEigenspace(0.9, method="subspace").fit(blocks)

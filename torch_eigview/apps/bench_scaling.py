@@ -154,7 +154,7 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
         if kind == "pipeline":
             # The whole build: per object flow + 41 synthesized views (two seeds 5 px apart),
             # stored once in a disk cache, then the eigenspace from the cache by the default
-            # method (the subspace iteration at this size, one pass per iteration).
+            # method (the exact Gram by panels).
             # Objects go to ``workers`` processes or threads (one torch thread each), results
             # come back in order.
             from torch_eigview.scale.parallel import synthesize_objects

@@ -5,8 +5,10 @@ source: a callable that returns a fresh iterable of blocks each time it is calle
 blocks are synthesized again, or read again from disk), a sequence of tensors, or one
 tensor split into row blocks. Every pass over the source must yield the same views.
 
-Three methods, all bounded in memory (``"auto"``, the default, takes ``"subspace"`` where
-:class:`~torch_eigview.decomposition.eigenspace.Eigenspace`'s "auto" would, else ``"exact"``):
+Three methods, all bounded in memory (``"auto"`` takes ``"subspace"`` where
+:class:`~torch_eigview.decomposition.eigenspace.Eigenspace`'s "auto" would, else ``"exact"``;
+the default is ``"exact"``: a pass over a stream costs more than the products alone, so a
+subspace iteration stopped for slow convergence costs more here than in memory):
 
 - ``"exact"``: pass 1 folds the views into their mean (float64 sums). When N <= P the
   N×N scatter matrix Σ_b (B_b − μ)ᵀ(B_b − μ) is accumulated in one more pass, blocks
@@ -97,7 +99,7 @@ class StreamingEigenspace(FittedEigenspace):
         self,
         n_components: int | float = 15,
         *,
-        method: str = "auto",
+        method: str = "exact",
         max_views: int = 4096,
         oversample: int = 10,
         n_iter: int = 2,
