@@ -37,6 +37,7 @@ def test_script_imports(path: Path) -> None:
 
 COIL_EXAMPLES = [
     "bench_correspondence",
+    "bench_eigen_solver",
     "bench_synthesis",
     "reject_unknown",
     "coil20_recognition",
@@ -88,6 +89,15 @@ def test_bench_synthesis(coil_root: Path) -> None:
         result["views"] == 3 * 41 and result["seconds"]["threads"] > 0 and result["seconds"]["one thread"] > 0
     )
     assert result["same_views"]
+
+
+@pytest.mark.coil
+def test_bench_eigen_solver(coil_root: Path) -> None:
+    """Three objects make 864 views, below SUBSPACE_MIN: "auto" runs the Gram path, and
+    both fits are one eigenspace."""
+    result = load("bench_eigen_solver").main(["--root", str(coil_root), "--objects", "3", "--rounds", "1"])
+    assert result["views"] == [4 * 3 * 72, 16384] and result["auto_ran"] == "gram"
+    assert result["max_principal_angle_rad"] < 1e-6 and all(result["seconds"]["auto"])
 
 
 @pytest.mark.coil
