@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -178,8 +180,11 @@ def test_streaming_subspace_matches_the_explicit_fit(monkeypatch: pytest.MonkeyP
     assert calls == [1, 1]
     StreamingEigenspace(0.9, method="auto").fit(blocks)
     assert calls == [1, 1]
-    with pytest.raises(ValueError, match="solver='subspace' needs an int n_components"):
+    with pytest.raises(ValueError, match="method='subspace' needs an int n_components"):
         StreamingEigenspace(0.9, method="subspace").fit(blocks)
+    assert StreamingEigenspace(0.9, method="auto").fit(blocks).method_ == "exact"
+    assert StreamingEigenspace(8, method="randomized").fit(blocks).method_ == "randomized"
+    assert StreamingEigenspace(8).method_ is None and Eigenspace(8).solver_ is None
 
 
 def test_streaming_falls_back_to_the_exact_passes(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -207,3 +212,32 @@ def test_auto_converges_within_its_budget_on_coil_views(
     assert got.solver_ == "subspace" and want.solver_ == "gram"
     assert _largest_angle(got.components_, want.components_) < 1e-5
     torch.testing.assert_close(got.eigenvalues_, want.eigenvalues_, atol=0, rtol=1e-5)
+
+
+def test_streaming_fallback_counts_the_passes(monkeypatch: pytest.MonkeyPatch) -> None:
+    """White noise, budget 5: three real iterations (one pass each) before the rate stops
+    it, then the exact path's passes, their mean pass shared: 1 + 3 + 2."""
+    monkeypatch.setattr(subspace, "iteration_budget", lambda *_: 5)
+    gen = torch.Generator().manual_seed(1)
+    x = torch.randn(410, 500, generator=gen, dtype=torch.float64)
+    got = StreamingEigenspace(8, method="subspace").fit(list(x.split(41)))
+    want = StreamingEigenspace(8, method="exact").fit(list(x.split(41)))
+    assert got.method_ == "exact" and want.n_passes_ == 3
+    assert got.n_passes_ == 1 + 3 + (want.n_passes_ - 1)
+    assert torch.equal(got.components_, want.components_)
+
+
+def test_a_failed_refit_keeps_the_record_consistent() -> None:
+    """``solver_`` names the solver of the fit that holds, set only once a fit succeeds."""
+    est = Eigenspace(5).fit(make_views(40, 12))
+    assert est.solver_ == "covariance"
+    with pytest.raises(ValueError, match="exceeds the rank"):
+        est.fit(make_views(5, 50))  # 5 views: rank 4 after centring
+    assert est.solver_ == "covariance"
+
+
+def test_on_course_reads_no_rate_from_an_overflow() -> None:
+    assert not subspace._on_course([math.inf, 5.0, 3.0], 3, 10)
+    assert not subspace._on_course([4.0, 5.0, math.nan], 3, 10)
+    assert subspace._on_course([100.0, 10.0, 1.5], 3, 10)  # rate 0.12: one more step
+    assert not subspace._on_course([100.0, 90.0, 81.0], 3, 10)  # rate 0.9: about 42 more

@@ -182,6 +182,7 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
             with for_products(flops) as n_threads:
                 space = StreamingEigenspace(k, method=kind, max_views=spec["max_views"]).fit(source)
             passes = space.n_passes_
+            extra["method"] = space.method_
         seconds = time.perf_counter() - t0
     return {
         **spec,
@@ -211,9 +212,11 @@ def _measure(spec: dict[str, Any]) -> dict[str, Any]:
     # Views a streaming fit holds at once: the exact Gram path a panel plus a chunk of later
     # views, the scatter path a chunk of N/2 views, the randomized one a block.
     max_views = result["max_views"]
-    if result["kind"] == "exact" or result.get("method") == "exact":
+    # (the method that ran: a subspace fit that handed over to the exact path held its views).
+    method = result.get("method", result["kind"])
+    if method == "exact":
         held = min(max_views, n) + min(CHUNK_VIEWS, max_views, n) if n < features else features // 2
-    elif result["kind"] in ("subspace", "pipeline"):
+    elif method == "subspace":
         held = min(CHUNK_VIEWS, n)  # a chunk of centred views
     else:
         held = 41 if result["kind"] == "randomized" else 0

@@ -35,14 +35,17 @@ def exact_solver(n_views: int, n_features: int) -> str:
     return "gram" if n_features > n_views else "covariance"
 
 
-def pick_solver(n_components: int | float, solver: str, n_views: int, n_features: int) -> str:
-    """The solver that runs for P × N views: ``solver``, or the one "auto" picks.
+def pick_solver(
+    n_components: int | float, solver: str, n_views: int, n_features: int, name: str = "solver"
+) -> str:
+    """The solver that runs for P × N views: ``solver``, or the one "auto" picks; ``name``
+    is the argument that chose it, for the message.
 
     Raises:
         ValueError: "subspace" with a fractional ``n_components``.
     """
     if solver == "subspace" and not isinstance(n_components, int):
-        raise ValueError(f"solver='subspace' needs an int n_components (k), got {n_components!r}")
+        raise ValueError(f"{name}='subspace' needs an int n_components (k), got {n_components!r}")
     if solver != "auto":
         return solver
     small = min(n_views, n_features)
@@ -92,7 +95,8 @@ class Eigenspace(FittedEigenspace):
     ``max(λ) * sqrt(max(P, N)) * eps(dtype)`` or the centring's rounding) are dropped, and
     each component's entry of largest magnitude is made positive, so results do not depend
     on the solver's signs. ``solver_`` is the solver that ran ("auto"'s choice, and "gram" or
-    "covariance" where "subspace" handed over to it).
+    "covariance" where "subspace" handed over to it; None before a fit, and for a fit made
+    elsewhere and handed in with ``from_fit``).
 
     Args:
         n_components: k as an int >= 1, or a float in (0, 1): the energy fraction, giving
@@ -118,11 +122,11 @@ class Eigenspace(FittedEigenspace):
     """
 
     _FIT_CALLS = "fit or fit_sparse"
-    solver_: str  # set by a fit
 
     def __init__(self, n_components: int | float = 15, *, solver: str = "auto") -> None:
         super().__init__(n_components)
         self.solver = check_choice(solver, "solver", _SOLVERS)
+        self.solver_: str | None = None  # None until a fit here (or a fit from elsewhere)
 
     def __repr__(self) -> str:
         return f"Eigenspace(n_components={self.n_components!r}, solver={self.solver!r})"
@@ -211,15 +215,14 @@ class Eigenspace(FittedEigenspace):
         solver = pick_solver(self.n_components, self.solver, n_views, n_features)
         if solver == "subspace":
             found = self._subspace(xc, mean, name)
-            self.solver_ = "subspace"
             if found is not None:
                 eigvals, components, total = found
                 self._state = EigenFit.from_eigenpairs(
                     mean, components, eigvals, total, n_views, image_shape, dtype
                 )
+                self.solver_ = solver
                 return xc
             solver = exact_solver(n_views, n_features)
-        self.solver_ = solver
 
         # The small symmetric eigenproblem runs in float64 (eigh is cheap at that size and
         # float32 eigenvectors of a nearly degenerate spectrum are poor); products stay in
@@ -237,6 +240,7 @@ class Eigenspace(FittedEigenspace):
             if solver == "gram":
                 components = (components @ xc) / eigvals.sqrt().to(dtype)[:, None]
         self._state = EigenFit.from_eigenpairs(mean, components, eigvals, total, n_views, image_shape, dtype)
+        self.solver_ = solver
         return xc
 
     def _subspace(

@@ -4,7 +4,10 @@ Every eigenspace the package fits (``Eigenspace``, ``StreamingEigenspace``,
 ``KernelEigenspace``, ``torch_eigview.scale.fit_distributed``) goes through these, so they
 agree to the last bit: the Gram product, the float64 eigensolver, the sign rule, the rank
 tolerance, the choice of k, the randomized range finder and the fit record
-:class:`EigenFit`. The names are public for the ``scale`` layer, not re-exported by
+:class:`EigenFit`. (Except where ``Eigenspace``'s "auto" takes the subspace solver of
+:mod:`torch_eigview.decomposition.subspace`, for an int k with P and N both at least
+``SUBSPACE_MIN``: that fit agrees with the exact ones to its tolerance, about 2e-6 rad in
+float32.) The names are public for the ``scale`` layer, not re-exported by
 :mod:`torch_eigview.decomposition`; inputs are trusted (callers validate them).
 
 Convention: a data matrix ``X`` is (P, N), one row per view; ``Xc`` is X minus the mean view.

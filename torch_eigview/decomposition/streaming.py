@@ -93,7 +93,6 @@ class StreamingEigenspace(FittedEigenspace):
     """
 
     _FIT_CALLS = "fit or fit_transform"
-    method_: str  # set by a fit
 
     def __init__(
         self,
@@ -115,6 +114,7 @@ class StreamingEigenspace(FittedEigenspace):
         # Validated here, not when the randomized method first draws Ω at the end of a pass.
         self.seed = check_int(seed, "seed", -(2**63), 2**64 - 1)
         self.n_passes_ = 0
+        self.method_: str | None = None  # None until a fit here (or a fit from elsewhere)
 
     def __repr__(self) -> str:
         return f"StreamingEigenspace(n_components={self.n_components!r}, method={self.method!r})"
@@ -169,7 +169,7 @@ class StreamingEigenspace(FittedEigenspace):
                 raise ValueError(f"blocks must hold at least 2 views in all, got P={stream.n_views}")
             method = self.method
             if method in ("auto", "subspace"):
-                method = pick_solver(self.n_components, method, stream.n_views, mean64.numel())
+                method = pick_solver(self.n_components, method, stream.n_views, mean64.numel(), "method")
             fit = self._subspace(stream, mean64) if method == "subspace" else None
             if fit is None and method == "randomized":
                 fit = self._randomized(stream, mean64)

@@ -49,14 +49,14 @@ Products = Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 def iteration_budget(n_views: int, n_features: int, width: int) -> int:
     """Iterations (each about 4·P·N·l flops, l = ``width``) that cost half what the exact
     path's products do (about (10/16)·2·P²·N flops for the Gram matrix by panels when
-    N > P, else P·N² for the scatter), at least one. The iteration is stopped as soon as
+    N > P, else 2·P·N² for the scatter), at least one. The iteration is stopped as soon as
     its rate shows it will not converge within them (from the third iteration), and the
     exact path takes over: a spectrum without a gap costs three iterations more than the
     exact path, one that converges less than half its time."""
     if n_features > n_views:
         exact = 1.25 * n_views * n_views * n_features
     else:
-        exact = float(n_views * n_features * n_features)
+        exact = 2.0 * n_views * n_features * n_features
     return max(1, int(exact // (8 * n_views * n_features * width)))
 
 
@@ -134,8 +134,10 @@ def _on_course(worst: list[float], it: int, max_iter: int) -> bool:
     third iteration on, one that will not is stopped at once rather than at the budget."""
     if it < 3:
         return True
+    if not (math.isfinite(worst[-1]) and math.isfinite(worst[-3])):
+        return False  # an overflow: no rate to read
     rate = math.sqrt(worst[-1] / worst[-3])
-    if not rate < 1:
+    if not 0 < rate < 1:
         return False
     return it + math.log(worst[-1]) / -math.log(rate) <= max_iter
 

@@ -292,7 +292,9 @@ class FewViewEigenspace:
         """Fits on gallery views that arrive block by block, never all in memory.
 
         The eigenspace is a :class:`~torch_eigview.decomposition.streaming.StreamingEigenspace`
-        (exact: equal to :meth:`fit`'s on the same views up to float rounding); a last
+        (exact: equal to :meth:`fit`'s on the same views up to float rounding, or to the
+        subspace solver's tolerance where :meth:`fit`'s eigenspace takes it: P and N both
+        at least 4096 views and values); a last
         pass projects the blocks into the gallery. Nothing is synthesized: the blocks
         are the gallery (real views, or views synthesized beforehand). Linear eigenspace
         only (``kernel=None``).

@@ -8,7 +8,8 @@ eigenspace of all P = Σ_r P_r views comes out identical on every rank:
   Xc_r Xc_sᵀ, memory: its shard plus one other), then one ``all_reduce``; every rank runs
   the same float64 ``eigh``; the components Λ^(−1/2) Σ_r V_rᵀ Xc_r by ``all_reduce`` of
   (k, N) partial sums. Equals :class:`~torch_eigview.decomposition.eigenspace.Eigenspace` on the
-  stacked views up to rounding.
+  stacked views up to rounding (to the subspace solver's tolerance where its "auto" takes
+  that solver: an int k with P and N both at least 4096).
 - ``method="randomized"``: the range finder of :mod:`torch_eigview.decomposition.streaming`, with
   Y = Σ_r Xc_rᵀ Ω_r reduced by ``all_reduce`` (N × l per pass); Ω's rows are drawn by
   global view number, so the result equals the single-process ``StreamingEigenspace``
