@@ -46,7 +46,7 @@ import torch
 from torch_eigview.check import check_int
 from torch_eigview.decomposition._fitted import FittedEigenspace
 from torch_eigview.decomposition._stream import BlockSource, Stream, blocks_of, stream_mean
-from torch_eigview.decomposition.eigenspace import pick_solver
+from torch_eigview.decomposition.eigenspace import exact_solver, pick_solver
 from torch_eigview.decomposition.linalg import (
     EigenFit,
     centred_k,
@@ -174,7 +174,8 @@ class StreamingEigenspace(FittedEigenspace):
             if fit is None and method == "randomized":
                 fit = self._randomized(stream, mean64)
             elif fit is None:  # exact, or the subspace iteration did not converge
-                exact = self._exact_covariance if mean64.numel() <= stream.n_views else self._exact_gram
+                gram_path = exact_solver(stream.n_views, mean64.numel()) == "gram"
+                exact = self._exact_gram if gram_path else self._exact_covariance
                 passes = self.n_passes_ - 1 if method == "subspace" else 0  # its mean pass is shared
                 fit = exact(stream, mean64)
                 self.n_passes_ += passes
@@ -208,12 +209,7 @@ class StreamingEigenspace(FittedEigenspace):
         # Blocks are gathered into chunks of up to N/2 views (a quarter of the scatter's bytes):
         # one 41-view block's product is a whole N×N matrix written and added for a rank-41
         # update, and 1,000 such are 13x slower than the explicit fit at N = 4096.
-        chunks = _Chunks(mean, max(1, n // 2), lambda _, c: scatter.add_(c.T @ c))
-        start = 0
-        for b in stream:
-            chunks.add(start, b)
-            start += b.shape[0]
-        chunks.close()
+        self._centred_chunks(stream, mean, lambda _, c: scatter.add_(c.T @ c), max(1, n // 2))
         self.n_passes_ = 2
         eigvals, basis, total = self._leading(scatter, stream, mean64)
         return self._record(stream, mean64, basis.T, eigvals, total)
@@ -268,17 +264,21 @@ class StreamingEigenspace(FittedEigenspace):
         k = self.n_components
         assert isinstance(k, int), "pick_solver admits subspace for an int k only"
         self.n_passes_ = 1  # the mean's
-        norms = torch.zeros(p, dtype=torch.float64, device=mean.device)
+        # ‖Xc‖² by rows (as Eigenspace), read in the first iteration's pass.
+        norms: torch.Tensor | None = None
 
         def products(v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            nonlocal norms
             w = mean.new_empty(p, v.shape[1])
             y = torch.zeros(n, v.shape[1], dtype=torch.float64, device=mean.device)
+            first = norms is None
+            rows = norms = mean64.new_zeros(p) if norms is None else norms
 
             def emit(start: int, chunk: torch.Tensor) -> None:
                 part = torch.matmul(chunk, v, out=w[start : start + chunk.shape[0]])
                 y.add_((chunk.T @ part).double())
-                if self.n_passes_ == 1:  # the first iteration: ‖Xc‖² by rows, as Eigenspace
-                    norms[start : start + chunk.shape[0]] = torch.linalg.vector_norm(chunk, dim=1).double()
+                if first:
+                    rows[start : start + chunk.shape[0]] = torch.linalg.vector_norm(chunk, dim=1).double()
 
             self._centred_chunks(stream, mean, emit)
             stream.check_result(w, "the products Xc V")
@@ -289,16 +289,21 @@ class StreamingEigenspace(FittedEigenspace):
         if found is None:
             return None
         eigvals, components = found
+        assert norms is not None, "a result comes after at least one pass"
         total = norms.square().sum()
         k = centred_k(k, eigvals, total, mean64, p, stream.dtype, _NAME)
         return self._record(stream, mean64, components[:k], eigvals[:k], total)
 
     @staticmethod
     def _centred_chunks(
-        stream: Stream, mean: torch.Tensor, emit: Callable[[int, torch.Tensor], object]
+        stream: Stream,
+        mean: torch.Tensor,
+        emit: Callable[[int, torch.Tensor], object],
+        rows: int = CHUNK_VIEWS,
     ) -> None:
-        """One pass: every block centred, gathered into chunks of up to CHUNK_VIEWS views."""
-        chunks = _Chunks(mean, CHUNK_VIEWS, emit)
+        """One pass: every block centred, gathered into chunks of up to ``rows`` views, each
+        handed to ``emit(first view, chunk)``."""
+        chunks = _Chunks(mean, rows, emit)
         start = 0
         for b in stream:
             chunks.add(start, b)

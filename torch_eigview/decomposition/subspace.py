@@ -51,8 +51,9 @@ def iteration_budget(n_views: int, n_features: int, width: int) -> int:
     path's products do (about (10/16)·2·P²·N flops for the Gram matrix by panels when
     N > P, else 2·P·N² for the scatter), at least one. The iteration is stopped as soon as
     its rate shows it will not converge within them (from the third iteration), and the
-    exact path takes over: a spectrum without a gap costs three iterations more than the
-    exact path, one that converges less than half its time."""
+    exact path takes over: a spectrum without a gap costs a few iterations (three to six in
+    the tests and benchmarks) more than the exact path, one that converges less than half
+    its time."""
     if n_features > n_views:
         exact = 1.25 * n_views * n_views * n_features
     else:
