@@ -283,10 +283,11 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
 
     A row splits into its exterior, before its first hit and after its last, where the
     map is the fallback plus one shift per side, and its interior, from the first hit to
-    the last, where holes interpolate between their neighbouring hits. Where most pixels
-    are holes the exterior is a few whole-grid passes (a running sum of the shifts), and
-    only the rows with a hole inside are gathered and scanned; where most are hits the
-    holes alone are.
+    the last, where holes interpolate between their neighbouring hits. The exterior is a
+    few whole-grid passes (a running sum of the shifts); the interior holes are found from
+    the row's changes between hit and hole (a gap opens where a hit is followed by a hole
+    and closes where a hole is followed by a hit), and only they are gathered: no scan over
+    every pixel of a row's interior, hits included.
 
     Args:
         src: (..., W) map, trusted where ``hit`` (any value elsewhere, NaN included).
@@ -297,11 +298,8 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
         (..., W) the map with its holes filled (a new tensor).
     """
     shape, w = src.shape, src.shape[-1]
-    n_holes = hit.numel() - int(hit.count_nonzero())
-    if n_holes == 0:
+    if int(hit.count_nonzero()) == hit.numel():
         return src.clone()
-    if 2 * n_holes < hit.numel():
-        return _fill_holes_only(src, hit, fallback)
     src_rows, hit_rows = src.reshape(-1, w), hit.reshape(-1, w)
     # First and last hit of each row as maxima over the row, in a small integer type (W and
     # -1 on a row without one, whose shifts are 0 and whose pixels are all exterior).
@@ -310,6 +308,7 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     cols = torch.arange(w, dtype=small, device=src.device)
     first = w - (as_int * (w - cols)).amax(dim=-1, keepdim=True)
     last = (as_int * (cols + 1)).amax(dim=-1, keepdim=True) - 1
+    del as_int
     ends = torch.cat([first, last], dim=1).clamp(0, w - 1).long()
     # The exterior's shift, map minus fallback at the nearest hit; 0 on a row without hits.
     fb_ends = fallback.expand(shape).gather(-1, ends.view(*shape[:-1], 2)).view(-1, 2)
@@ -324,74 +323,39 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     steps.scatter_add_(1, (ends[:, 1:] + 1).clamp_(max=w - 1), shift[:, 1:])
     out = steps.cumsum_(dim=1).view(shape).add_(fallback)
     del steps
-    torch.where(hit, src, out, out=out)
-    out = out.view(-1, w)
-    # Holes between two hits interpolate: only the rows that have one (fewer hits than
-    # columns from the first hit to the last) are scanned, and none where the hits fill
-    # every row's extent.
-    extent = (last - first + 1).clamp_(min=0)
-    if int(extent.sum()) == hit.numel() - n_holes:
-        return out.view(shape)
-    rows = (extent > as_int.sum(dim=1, keepdim=True, dtype=small)).nonzero()[:, 0]
-    if rows.numel():
-        part = out.index_select(0, rows)
-        firstf, lastf = (v.index_select(0, rows).to(src.dtype) for v in (first, last))
-        _fill_interior(
-            part.view(-1), src_rows.index_select(0, rows), hit_rows.index_select(0, rows), firstf, lastf
-        )
-        out.index_copy_(0, rows, part)
-    return out.view(shape)
+    if torch.is_grad_enabled() and (src.requires_grad or fallback.requires_grad):
+        out = torch.where(hit, src, out)  # differentiable: no out= argument
+    else:
+        torch.where(hit, src, out, out=out)
+    _fill_gaps(out.view(-1, w), src_rows, hit_rows, first.view(-1), last.view(-1))
+    return out
 
 
-def _fill_holes_only(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
-    """:func:`fill_row_holes` where most pixels are hits (a warp's map over a textured view):
-    the holes alone, gathered flat, which costs less than a pass over every row's interior.
-    The values are those of the interior and exterior rules (the same expressions)."""
-    w = src.shape[-1]
-    cols = torch.arange(w, dtype=torch.int32, device=src.device)
-    # The nearest hit before and after each pixel: a running max / min over the row.
-    prev = torch.where(hit, cols, -1).cummax(dim=-1).values
-    nxt = torch.where(hit, cols, w).flip(-1).cummin(dim=-1).values.flip(-1)
-    holes = (~hit).reshape(-1).nonzero().squeeze(1)
-    col = holes % w
-    row = holes - col
-    p, n = (v.reshape(-1).index_select(0, holes).long() for v in (prev, nxt))
-    flat = (src.reshape(-1), fallback.expand_as(src).contiguous().reshape(-1))  # one copy, not one per gather
-    sp, sn, fp, fn = (v.index_select(0, row + i.clamp(0, w - 1)) for v in flat for i in (p, n))
-    f0 = flat[1].index_select(0, holes)
-    has_prev, has_next = p >= 0, n < w
-    span = (n.clamp(max=w - 1) - p.clamp(min=0)).clamp_min(1).to(sp.dtype)
-    between = sp + (sn - sp) * (col - p.clamp(min=0)).to(sp.dtype) / span
-    filled = torch.where(has_prev & has_next, between, torch.where(has_prev, f0 + (sp - fp), f0 + (sn - fn)))
-    out = src.reshape(-1).clone()
-    out.index_put_((holes,), torch.where(has_prev | has_next, filled, f0))
-    return out.view(src.shape)
-
-
-def _fill_interior(
+def _fill_gaps(
     out: torch.Tensor, src: torch.Tensor, hit: torch.Tensor, first: torch.Tensor, last: torch.Tensor
 ) -> None:
-    """Writes into ``out`` (R·W,) the map of every row's interior, columns ``first``..``last``
-    ((R, 1), float): the hits' own values and, between two hits, the linear interpolation
-    of theirs. ``src`` and ``hit`` are (R, W)."""
+    """Writes into ``out`` (R, W) the holes between two hits of a row: the linear
+    interpolation of the hits on either side. ``src`` and ``hit`` are (R, W); ``first`` and
+    ``last`` (R,) each row's first and last hit."""
     w = src.shape[1]
-    count = (last - first + 1).clamp_(min=0).view(-1).long()
-    total = int(count.sum())
-    if total == 0:
+    # A row's changes between hit and hole alternate: its leading gap closes at its first
+    # hit and its trailing gap opens at its last (both exterior); the others pair up, each
+    # gap opened (at its hit p) and then closed (at its last hole, n - 1).
+    change = (hit[:, 1:] ^ hit[:, :-1]).nonzero()  # (row, k): columns k and k + 1 differ
+    row, k = change.unbind(1)
+    keep = (k != last.index_select(0, row)) & (k + 1 != first.index_select(0, row))
+    gaps = change[keep].view(-1, 2, 2)  # (gap, open | close, row | k)
+    if gaps.shape[0] == 0:
         return
-    rows = torch.repeat_interleave(torch.arange(count.numel(), device=src.device), count, output_size=total)
-    start = (count.cumsum(0) - count).index_select(0, rows)
-    col = first.view(-1).long().index_select(0, rows) + (torch.arange(total, device=src.device) - start)
-    flat = rows * w + col
-    hit_i = hit.reshape(-1).index_select(0, flat)
-    src_i = src.reshape(-1).index_select(0, flat)
-    # Every interior starts and ends with a hit, so running scans over the concatenated
-    # interiors find each pixel's previous and next hit inside its own row.
-    pos = torch.arange(total, device=src.device)
-    prev = torch.where(hit_i, pos, -1).cummax(dim=0).values
-    nxt = torch.where(hit_i, pos, total).flip(0).cummin(dim=0).values.flip(0)
-    colf = col.to(src.dtype)
-    sp, sn = src_i.index_select(0, prev), src_i.index_select(0, nxt)
-    p, n = colf.index_select(0, prev), colf.index_select(0, nxt)
-    between = sp + (sn - sp) * (colf - p) / (n - p).clamp_min(1)
-    out.index_copy_(0, flat, torch.where(hit_i, src_i, between))
+    row, p = gaps[:, 0].unbind(1)
+    n = gaps[:, 1, 1] + 1
+    count = n - p - 1
+    total = int(count.sum())
+    g = torch.repeat_interleave(torch.arange(count.numel(), device=src.device), count, output_size=total)
+    start = (count.cumsum(0) - count).index_select(0, g)
+    p, n, base = p.index_select(0, g), n.index_select(0, g), row.index_select(0, g) * w
+    col = p + 1 + (torch.arange(total, device=src.device) - start)
+    flat = src.reshape(-1)
+    sp, sn = flat.index_select(0, base + p), flat.index_select(0, base + n)
+    colf, pf, nf = col.to(src.dtype), p.to(src.dtype), n.to(src.dtype)
+    out.view(-1).index_copy_(0, base + col, sp + (sn - sp) * (colf - pf) / (nf - pf).clamp_min(1))
