@@ -250,13 +250,14 @@ def test_refine_2d_stops_at_a_fixed_point_with_the_same_result() -> None:
 
 
 @pytest.mark.parametrize("second", [False, True])
-@pytest.mark.parametrize("angles", ["shared", "per_object", "own"])
+@pytest.mark.parametrize("angles", ["shared", "per_object", "own", "view_1_only"])
 def test_source_maps_on_a_background_equal_the_whole_grid_maps_bit_for_bit(
     second: bool, angles: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Objects on a background (most pixels invalid): Eq. 2 at the valid pixel pairs alone
     (invert_row_segments) gives the whole-grid maps bit for bit, for T shared angles and
-    for each object's own; the seed's own angle (every pixel trusted) takes the whole grid."""
+    for each object's own; among shared angles the seed's own (every pixel trusted) take
+    the whole grid and the others the pairs, each angle's map as in one whole-grid call."""
     b, h, w = 3, 10, 24
     corr = _corr(b, h, w, 7, torch.float32)
     band = torch.zeros(b, h, w, dtype=torch.bool)
@@ -267,6 +268,7 @@ def test_source_maps_on_a_background_equal_the_whole_grid_maps_bit_for_bit(
         "shared": [-12.0, 6.0, 14.0],
         "per_object": torch.tensor([[-12.0, 4.0], [7.0, 15.0], [-3.0, 9.5]]),
         "own": [-12.0, 0.0, 6.0, 10.0],
+        "view_1_only": [0.0],  # view 1's own angle alone: no angle for the pairs
     }[angles]
     warp = NovelViewWarp(10.0)
     captured: dict[str, RowGeometry] = {}
@@ -296,8 +298,10 @@ def test_source_maps_on_a_background_equal_the_whole_grid_maps_bit_for_bit(
         args = (cols, cols + corr.disparity_12, corr.valid_12)
     src, _, hit = geo.source_maps(*args, second=second)
     ref_src, _, ref_hit = _old_source_maps(geo, *args, second=second)
-    assert calls == ([] if angles == "own" else [1])  # a seed's own angle: the whole grid
-    assert torch.equal(hit, ref_hit) and bool(hit.any()) and bool((~hit).any())
+    # A seed's own angles apart, on the whole grid, the others by segments.
+    whole = angles == "view_1_only" and not second  # the seed reproduced: every pixel hit
+    assert calls == ([] if whole else [1])
+    assert torch.equal(hit, ref_hit) and bool(hit.any()) and bool((~hit).any()) != whole
     assert torch.equal(src, ref_src)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 import torch.nn.functional as F
@@ -189,27 +189,10 @@ class RowGeometry:
         """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
         in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
         c, al, th = self.c, self.alpha, self.theta
-        b, h, w = x1.shape
-        # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
-        # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
-        other = self.a if second else self.b
-        own = other == 0
-        # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
-        scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
-        cols = torch.arange(w, dtype=x1.dtype, device=x1.device)
-        fallback = (c + (cols - c) * scale).expand(b, th.shape[1], h, w)
-        inverse = None if bool(own.any()) else self._segment_inverse(x1, x2, valid, fallback)
-        if inverse is None:
-            big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
-            big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
-            dst_x_for_src = c + self.a * big_x + self.b * x2c
-            depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
-            inverse = invert_row_map(
-                dst_x_for_src, valid[:, None] | own, depth, self.max_stretch, fallback=fallback
-            )
-        src_x, hit = inverse
+        src_x, hit = self._row_inverse(x1, x2, valid, second)
         if self.tilt == 0.0:
             return src_x, None, hit
+        own = (self.a if second else self.b) == 0
         # The 2D displacement (dst_x - grid, dy) is linear in the grid's centred column G and
         # the disparity D towards the other view: x1 - c = G, x2 - c = G + D for view 1 as the
         # source, x2 - c = G, x1 - c = G + D for view 2.
@@ -224,6 +207,49 @@ class RowGeometry:
         )
         disparity = x1 - x2 if second else x2 - x1
         return _refine_2d(src_x, disparity, coef, c, valid, own)
+
+    def _row_inverse(
+        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, second: bool
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The row-wise inverse of :meth:`source_maps`, ``(src_x, hit)``, (B, T, H, W) each:
+        from the valid pairs alone where no angle is the seed's own (:meth:`_segment_inverse`),
+        the seed's own shared angles split off (:meth:`_split_own`), else on the whole grid."""
+        c, al, th = self.c, self.alpha, self.theta
+        b, h, w = x1.shape
+        # Where the other view's coefficient vanishes (theta at this seed's own angle) the map
+        # needs no correspondence: every pixel is trusted, and the seed view is reproduced.
+        own = (self.a if second else self.b) == 0
+        if own.shape[0] == 1 and bool(own.any()) and not bool(own.all()):
+            return self._split_own(x1, x2, valid, second, own.view(-1))
+        # Without a correspondence a pixel moves as a plane through the axis (Z = 0).
+        scale = (math.cos(al) if second else 1.0) / torch.cos(th).clamp_min(1e-6)
+        cols = torch.arange(w, dtype=x1.dtype, device=x1.device)
+        fallback = (c + (cols - c) * scale).expand(b, th.shape[1], h, w)
+        inverse = None if bool(own.any()) else self._segment_inverse(x1, x2, valid, fallback)
+        if inverse is not None:
+            return inverse
+        big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
+        big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
+        dst_x_for_src = c + self.a * big_x + self.b * x2c
+        depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        return invert_row_map(dst_x_for_src, valid[:, None] | own, depth, self.max_stretch, fallback=fallback)
+
+    def _split_own(
+        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, second: bool, own: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`_row_inverse` for angles shared by the batch (``own`` (T,) bool) of which
+        some, not all, are the seed's own: those on the whole grid (every pixel trusted),
+        the others from the valid pairs alone (:meth:`_segment_inverse`), each angle's map
+        the same as in one call over all of them."""
+        b, h, w = x1.shape
+        src_x = x1.new_empty(b, own.numel(), h, w)
+        hit = torch.empty(src_x.shape, dtype=torch.bool, device=x1.device)
+        for sel in (own.nonzero().squeeze(1), (~own).nonzero().squeeze(1)):
+            part = replace(self, a=self.a[:, sel], b=self.b[:, sel], theta=self.theta[:, sel])
+            sx, sh = part._row_inverse(x1, x2, valid, second)
+            src_x.index_copy_(1, sel, sx)
+            hit.index_copy_(1, sel, sh)
+        return src_x, hit
 
     def _segment_inverse(
         self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, fallback: torch.Tensor
