@@ -139,33 +139,25 @@ def single_threaded_blas() -> contextlib.AbstractContextManager[object]:
     return limited
 
 
-#: Matrices up to this size take LAPACK's full ``eigh`` in :func:`eigh_descending`, larger
-#: ones ARPACK's leading pairs (the cost of SciPy's import against the full solve's).
-ARPACK_MIN = 1024
-
-
 def eigh_descending(matrix: torch.Tensor, top: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Eigenpairs of a symmetric float64 (n, n) matrix by decreasing eigenvalue.
 
-    For a few leading pairs of a large matrix on the CPU (n above ``ARPACK_MIN``):
-    ARPACK's implicitly restarted Lanczos (SciPy's ``eigsh``, ``tol=0``: converged to
-    machine precision, a fixed pseudo-random start, deterministic). On image data, whose
-    spectrum decays, it needs a few hundred products with the n×n matrix: 0.03 s against
-    0.08–0.11 s for LAPACK's full ``eigh`` at n = 820, k = 15 (COIL-20), eigenpairs equal
-    to 1e-15. Its first call in a process also imports SciPy's sparse linear algebra
-    (0.3 s), which costs more than the full ``eigh`` up to n = 1024 (0.13–0.23 s on one or
-    two threads), so smaller matrices take LAPACK's. On a flat spectrum (white noise)
-    ARPACK is up to 1.5x slower than ``dsyevr``, and where it does not converge (or cannot
-    start: a zero matrix) ``dsyevr`` (MRRR, backward stable) takes over. The rank
-    (eigenvalues above a tolerance) is exact from the leading ``top``: when it is below
-    ``top`` the remaining eigenvalues, smaller, are below it too.
+    For a few leading pairs of a large matrix on the CPU: ARPACK's implicitly restarted
+    Lanczos (SciPy's ``eigsh``, ``tol=0``: converged to machine precision, a fixed
+    pseudo-random start, deterministic). On image data, whose spectrum decays, it needs a
+    few hundred products with the n×n matrix: 0.02 s against 0.07 s for LAPACK's
+    ``dsyevr`` on an index subset at n = 820, k = 15 (COIL-20), eigenpairs equal to 1e-15.
+    On a flat spectrum (white noise) it is up to 1.5x slower than ``dsyevr``, and where it
+    does not converge (or cannot start: a zero matrix) ``dsyevr`` (MRRR, backward
+    stable) takes over. The rank (eigenvalues above a tolerance) is exact from the leading
+    ``top``: when it is below ``top`` the remaining eigenvalues, smaller, are below it too.
 
     Returns:
         Eigenvalues (t,) descending and eigenvectors (n, t) as columns: t = ``top`` for a
         large matrix, else all n (also when ``top`` is None).
     """
     n = matrix.shape[0]
-    if top is not None and matrix.device.type == "cpu" and n > ARPACK_MIN and top <= n // 4:
+    if top is not None and matrix.device.type == "cpu" and n >= 256 and top <= n // 4:
         from scipy.linalg import eigh  # scikit-image depends on SciPy
         from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 
