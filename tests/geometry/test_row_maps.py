@@ -308,3 +308,16 @@ def test_fill_row_holes_paths_agree_bit_for_bit(dtype: torch.dtype) -> None:
     sparse = fill_row_holes(padded, torch.cat([hit, torch.zeros(30, 40, dtype=torch.bool)]), fallback)
     assert torch.equal(dense, sparse[:6])
     assert torch.equal(dense[hit], src[hit]) and torch.equal(dense[2], fallback)
+
+
+@pytest.mark.parametrize("hit_rate", [0.3, 0.8])
+def test_fill_row_holes_differentiates_strided_inputs(hit_rate: float) -> None:
+    """A permuted (non-contiguous) map and mask with a gradient: the values of the
+    contiguous call, and gradients that pass gradcheck, for either share of holes."""
+    gen = torch.Generator().manual_seed(5)
+    hit = (torch.rand(5, 4, 6, generator=gen) < hit_rate).permute(2, 1, 0)
+    src = torch.randn(5, 4, 6, generator=gen, dtype=torch.float64).permute(2, 1, 0).requires_grad_()
+    fallback = torch.linspace(0.0, 4.0, 5, dtype=torch.float64, requires_grad=True)
+    out = fill_row_holes(src, hit, fallback)
+    assert torch.equal(out, fill_row_holes(src.detach().contiguous(), hit.contiguous(), fallback.detach()))
+    assert torch.autograd.gradcheck(lambda s, f: fill_row_holes(s, hit, f), (src, fallback))

@@ -324,7 +324,7 @@ def fill_row_holes(src: torch.Tensor, hit: torch.Tensor, fallback: torch.Tensor)
     out = steps.cumsum_(dim=1).view(shape).add_(fallback)
     del steps
     if torch.is_grad_enabled() and (src.requires_grad or fallback.requires_grad):
-        out = torch.where(hit, src, out)  # differentiable: no out= argument
+        out = torch.where(hit, src, out).contiguous()  # differentiable: no out= argument
     else:
         torch.where(hit, src, out, out=out)
     _fill_gaps(out.view(-1, w), src_rows, hit_rows, first.view(-1), last.view(-1))
@@ -357,5 +357,6 @@ def _fill_gaps(
     col = p + 1 + (torch.arange(total, device=src.device) - start)
     flat = src.reshape(-1)
     sp, sn = flat.index_select(0, base + p), flat.index_select(0, base + n)
-    colf, pf, nf = col.to(src.dtype), p.to(src.dtype), n.to(src.dtype)
-    out.view(-1).index_copy_(0, base + col, sp + (sn - sp) * (colf - pf) / (nf - pf).clamp_min(1))
+    # Column differences in integers (exact in any float dtype, half precision included).
+    step, span = (col - p).to(src.dtype), (n - p).to(src.dtype)
+    out.view(-1).index_copy_(0, base + col, sp + (sn - sp) * step / span)
