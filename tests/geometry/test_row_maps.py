@@ -294,9 +294,9 @@ def test_fill_row_holes_object_rows(dtype: torch.dtype) -> None:
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_fill_row_holes_paths_agree_bit_for_bit(dtype: torch.dtype) -> None:
-    """Mostly hits (the holes gathered alone) and mostly holes (row interiors) give the
-    same values: rows are independent, and rows of holes added below push a batch from
-    one path to the other."""
+    """Mostly hits and mostly holes give the same values: rows are independent, and rows
+    of holes added below a batch change none of its rows (the former code took two paths
+    by the share of holes; one remains)."""
     gen = torch.Generator().manual_seed(3)
     src = torch.rand(6, 40, generator=gen, dtype=dtype) * 40
     hit = torch.rand(6, 40, generator=gen) > 0.2

@@ -1,6 +1,6 @@
 """The fast map building and sampling against the code they replaced, kept here as the reference.
 
-``fill_row_holes`` (holes only) and ``ViewWarp.apply_maps`` (one ``grid_sample`` for all
+``fill_row_holes`` (the gaps between hits gathered alone) and ``ViewWarp.apply_maps`` (one ``grid_sample`` for all
 sources and angles) must equal the former implementations bit for bit; the 2D refinement,
 which now samples one shared disparity field instead of T stacked displacement fields,
 equals the former one up to float rounding, and its early stop at a fixed point changes
