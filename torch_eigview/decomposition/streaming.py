@@ -265,23 +265,24 @@ class StreamingEigenspace(FittedEigenspace):
         assert isinstance(k, int), "pick_solver admits subspace for an int k only"
         self.n_passes_ = 1  # the mean's
         # ‖Xc‖² by rows (as Eigenspace), read in the first iteration's pass.
-        norms: torch.Tensor | None = None
+        norms = mean64.new_zeros(p)
+        norms_read = False
 
         def products(v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            nonlocal norms
+            nonlocal norms_read
             w = mean.new_empty(p, v.shape[1])
             y = torch.zeros(n, v.shape[1], dtype=torch.float64, device=mean.device)
-            first = norms is None
-            rows = norms = mean64.new_zeros(p) if norms is None else norms
+            first = not norms_read
 
             def emit(start: int, chunk: torch.Tensor) -> None:
                 part = torch.matmul(chunk, v, out=w[start : start + chunk.shape[0]])
                 y.add_((chunk.T @ part).double())
                 if first:
-                    rows[start : start + chunk.shape[0]] = torch.linalg.vector_norm(chunk, dim=1).double()
+                    norms[start : start + chunk.shape[0]] = torch.linalg.vector_norm(chunk, dim=1).double()
 
             self._centred_chunks(stream, mean, emit)
             stream.check_result(w, "the products Xc V")
+            norms_read = True
             self.n_passes_ += 1
             return w, y
 
@@ -289,7 +290,6 @@ class StreamingEigenspace(FittedEigenspace):
         if found is None:
             return None
         eigvals, components = found
-        assert norms is not None, "a result comes after at least one pass"
         total = norms.square().sum()
         k = centred_k(k, eigvals, total, mean64, p, stream.dtype, _NAME)
         return self._record(stream, mean64, components[:k], eigvals[:k], total)
