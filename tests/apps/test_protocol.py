@@ -78,3 +78,64 @@ def test_score_without_a_correct_view_has_no_pose_error() -> None:
     result = score(rec, [("wrong", 1, x[:2], poses[:2])])
     assert result.accuracy == 0.0 and result.per_object == {"wrong": 0.0}
     assert math.isnan(result.pose_mae_deg)
+
+
+def _pose_tests(
+    x: torch.Tensor, labels: torch.Tensor, poses: torch.Tensor
+) -> list[tuple[str, int, torch.Tensor, torch.Tensor]]:
+    """Each object's gallery views as its test views, their true poses one degree past the
+    gallery's."""
+    out = []
+    for label in labels.unique().tolist():
+        sel = (labels == label).nonzero()[:, 0]
+        out.append((f"obj{label}", label, x[sel], poses[sel] + 1.0))
+    return out
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+def test_score_runs_the_pose_function_over_worker_threads(workers: int) -> None:
+    """``workers`` threads measure the poses (``pose_fn``), one object's views each: the
+    same scores, in the objects' order, as in this thread; each call sees the correctly
+    recognized views of one object only."""
+    import threading
+
+    blocks = [(_views(4, 20 + k), k, [10.0 * k + j for j in range(4)]) for k in range(5)]
+    x, labels, poses = stack_gallery(blocks)
+    rec = build_recognizer(x, labels, poses, 6)
+    tests = _pose_tests(x, labels, poses)
+    tests[2] = ("obj2", 3, tests[2][2], tests[2][3])  # recognized as 2, scored as 3: no view counts
+    calls: list[tuple[list[int], str]] = []
+
+    def pose_fn(views: torch.Tensor, got: torch.Tensor, rough: torch.Tensor) -> torch.Tensor:
+        calls.append((sorted(set(got.tolist())), threading.current_thread().name))
+        return rough + 0.25 * got.to(rough.dtype)  # the pose a label-dependent distance off
+
+    here = score(rec, tests, pose_fn=pose_fn)
+    here_calls = list(calls)
+    calls.clear()
+    there = score(rec, tests, pose_fn=pose_fn, workers=workers)
+    assert (there.accuracy, there.per_object, there.n_test) == (here.accuracy, here.per_object, here.n_test)
+    assert there.pose_mae_deg == here.pose_mae_deg and there.pose_median_deg == here.pose_median_deg
+    # |rough + 0.25 k - (rough + 1)| over the recognized objects 0, 1, 3, 4.
+    assert here.pose_mae_deg == pytest.approx(sum(abs(0.25 * k - 1.0) for k in (0, 1, 3, 4)) / 4)
+    assert [c[0] for c in calls] == [c[0] for c in here_calls] == [[0], [1], [3], [4]]
+    assert all(name.startswith("eigview-job") for _, name in calls)
+    assert all(name == threading.current_thread().name for _, name in here_calls)
+
+
+def test_score_raises_a_pose_functions_error_from_a_worker() -> None:
+    x, labels, poses = stack_gallery([(_views(3, 30 + k), k, [0.0, 1.0, 2.0]) for k in range(3)])
+    rec = build_recognizer(x, labels, poses, 4)
+
+    def pose_fn(views: torch.Tensor, got: torch.Tensor, rough: torch.Tensor) -> torch.Tensor:
+        raise ValueError(f"cannot place object {int(got[0])}")
+
+    with pytest.raises(ValueError, match="cannot place object 0"):
+        score(rec, _pose_tests(x, labels, poses), pose_fn=pose_fn, workers=2)
+
+
+def test_score_checks_workers() -> None:
+    x, labels, poses = stack_gallery([(_views(2, 40), 0, [0.0, 1.0])])
+    rec = build_recognizer(x, labels, poses, 1)
+    with pytest.raises(ValueError, match="workers"):
+        score(rec, [("a", 0, x, poses)], workers=-1)

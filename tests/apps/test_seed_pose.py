@@ -11,10 +11,13 @@ from pathlib import Path
 import pytest
 import torch
 
+import torch_eigview.apps.experiment as experiment
+import torch_eigview.apps.protocol as protocol
 from torch_eigview.apps.cli import main
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.apps.seed_pose import SeedPoses
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.scale.thread_policy import threads
 from torch_eigview.synthesis import SynthesisOptions
 
 # The sparse gallery (the two seeds alone) gives each view one of two poses, so the
@@ -43,6 +46,28 @@ def test_three_view_pose_from_the_command(coil_root: Path, tmp_path: Path) -> No
     assert isinstance(err_rough, dict) and isinstance(err_geo, dict)
     assert err_geo["mean"] < 0.75 * err_rough["mean"]
     assert err_geo["median"] < 1.0
+
+
+@pytest.mark.coil
+def test_three_view_pose_over_worker_threads(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The experiment's workers measure the poses as threads, one object each (not as
+    processes, nor off the CPU): the same scores and pose errors as in this thread (both
+    under the commands' one torch thread)."""
+    given: list[int] = []
+
+    def spy(*args: object, workers: int = 0, **kwargs: object) -> object:
+        given.append(workers)
+        return protocol.score(*args, workers=workers, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(experiment, "score", spy)
+    base = dict(alpha=10.0, test=(-5.0, 15.0), objects=[1, 2, 3], components=3, method="sparse")
+    with threads(1):
+        here = CoilExperiment(three_view_pose=True, **base).run(folder)  # type: ignore[arg-type]
+        there = CoilExperiment(three_view_pose=True, workers=2, **base).run(folder)  # type: ignore[arg-type]
+        CoilExperiment(workers=2, worker_kind="process", **base).run(folder)  # type: ignore[arg-type]
+    assert given == [0, 2, 0]
+    assert there.per_object == here.per_object
+    assert (there.pose_mae_deg, there.pose_median_deg) == (here.pose_mae_deg, here.pose_median_deg)
 
 
 def test_experiment_passes_its_seeds(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:

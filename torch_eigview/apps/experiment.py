@@ -39,6 +39,7 @@ from torch_eigview.apps.circle import (
     check_overlap,
     circle_layout,
 )
+from torch_eigview.apps.coil_result import CoilResult
 from torch_eigview.apps.object_synthesis import object_galleries
 from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
 from torch_eigview.apps.seed_pose import SeedPoses
@@ -54,7 +55,6 @@ from torch_eigview.check import (
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import wrap_angle
-from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.scale.parallel import KINDS
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews
 
@@ -70,39 +70,6 @@ def _check_angles(values: object, name: str, size: int, layout: str) -> None:
     for v in values:
         if not math.isfinite(check_number(v, name)):
             raise ValueError(f"{name}={tuple(values)!r} must hold finite numbers of degrees {layout}")
-
-
-@dataclass
-class CoilResult:
-    """Outcome of one experiment; ``to_json()`` gives the documented JSON record."""
-
-    accuracy: float
-    per_object: dict[int, float]
-    pose_mae_deg: float
-    n_test: int
-    n_train_views: int
-    seconds: dict[str, float]
-    recognizer: NearestNeighborRecognizer
-    elevations: dict[int, list[float]] = field(default_factory=dict)
-    pose_median_deg: float = math.nan
-
-    def to_json(self) -> dict[str, object]:
-        """The record: accuracy, per_object, n_test, n_train_views, seconds, and the pose
-        error of the correctly recognized views (``pose_mae_deg`` and ``pose_error_deg``
-        with its mean and median; null when no view is recognized)."""
-
-        def finite(value: float) -> float | None:
-            return value if math.isfinite(value) else None
-
-        return {
-            "accuracy": self.accuracy,
-            "per_object": {str(k): v for k, v in self.per_object.items()},
-            "pose_mae_deg": finite(self.pose_mae_deg),
-            "pose_error_deg": {"mean": finite(self.pose_mae_deg), "median": finite(self.pose_median_deg)},
-            "n_test": self.n_test,
-            "n_train_views": self.n_train_views,
-            "seconds": self.seconds,
-        }
 
 
 @dataclass
@@ -140,10 +107,11 @@ class CoilExperiment:
             not the nearest view's pose.
         three_view_pose: then measure each pose by geometry from the pose above, against
             the recognized object's seeds (:class:`~torch_eigview.apps.seed_pose.SeedPoses`,
-            0.14–0.26 s a view on two CPU cores); not with ``seeds=2`` (Eq. 2 is singular).
+            about 0.13 s a view over two worker threads); not with ``seeds=2`` (Eq. 2 is singular).
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
             (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
-        workers: workers that synthesize the ``nvs`` galleries, one object each at a time
+        workers: workers that synthesize the ``nvs`` galleries, one object each at a time,
+            and as threads measure the geometric poses (``three_view_pose``)
             (:func:`~torch_eigview.scale.parallel.map_ordered`; processes run one torch
             thread each, threads torch's current setting: the commands run them under
             ``threads(1)``, and a script should too); 0
@@ -374,7 +342,15 @@ class CoilExperiment:
         else:
             test_poses = layout.tests
         tests = self._tests(folder, objects, test_poses, x.dtype)
-        result = score(recognizer, tests, wrap=True, interpolate_pose=self.interpolate_pose, pose_fn=pose_fn)
+        threads = self.workers if folder.device.type == "cpu" and self.worker_kind == "thread" else 0
+        result = score(
+            recognizer,
+            tests,
+            wrap=True,
+            interpolate_pose=self.interpolate_pose,
+            pose_fn=pose_fn,
+            workers=threads,
+        )
         seconds["recognition"] = time.perf_counter() - t0
         # Wall time of the whole run, reading the images included.
         seconds["total"] = time.perf_counter() - t_start

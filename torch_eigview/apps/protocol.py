@@ -16,13 +16,15 @@ The COIL experiment (:mod:`torch_eigview.apps.experiment`) and the synthetic one
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Callable, Hashable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 import torch
 
+from torch_eigview.check import check_int
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
@@ -30,6 +32,7 @@ from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
+from torch_eigview.scale.parallel import map_ordered
 from torch_eigview.scale.thread_policy import eigen_flops, for_products
 
 __all__ = [
@@ -162,6 +165,7 @@ def score(
     wrap: bool = False,
     interpolate_pose: bool = False,
     pose_fn: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
+    workers: int = 0,
 ) -> Score[K]:
     """Recognizes every object's test views and scores them.
 
@@ -178,21 +182,39 @@ def score(
             replaces the recognizer's poses (the start it is given) of the correctly
             recognized views, the only ones scored; e.g.
             :class:`~torch_eigview.apps.seed_pose.SeedPoses`.
+        workers: threads that run ``pose_fn``, one object each at a time, while this
+            thread recognizes the next objects (0: all in this thread). Each runs torch
+            under the caller's intra-op threads: use them under
+            :func:`~torch_eigview.scale.thread_policy.threads` ``(1)``, as the commands
+            do (:func:`~torch_eigview.scale.parallel.map_ordered`).
     """
+    workers = check_int(workers, "workers", minimum=0)
     per_object: dict[K, float] = {}
-    n_ok, n_test, pose_err = 0, 0, []
-    for key, label, views, truth in tests:
-        result = recognizer.predict(views, interpolate_pose=interpolate_pose)
-        ok = result.labels == label
-        per_object[key] = 100.0 * float(ok.double().mean())
-        n_ok += int(ok.sum())
-        n_test += truth.shape[0]
-        poses, truth = result.poses[ok], truth[ok]  # the pose error counts recognized views only
+    counts = {"ok": 0, "test": 0}
+
+    def recognized() -> Iterator[tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]]:
+        # In this thread, in order: map_ordered consumes the jobs here.
+        for key, label, views, truth in tests:
+            result = recognizer.predict(views, interpolate_pose=interpolate_pose)
+            ok = result.labels == label
+            per_object[key] = 100.0 * float(ok.double().mean())
+            counts["ok"] += int(ok.sum())
+            counts["test"] += truth.shape[0]
+            # The pose error counts recognized views only.
+            yield views[ok.to(views.device)], result.labels[ok], result.poses[ok], truth[ok]
+
+    def pose_error(
+        views: torch.Tensor, labels: torch.Tensor, poses: torch.Tensor, truth: torch.Tensor
+    ) -> torch.Tensor:
         if pose_fn is not None and poses.numel():
-            poses = pose_fn(views[ok.to(views.device)], result.labels[ok], poses)
+            poses = pose_fn(views, labels, poses)
         diff = poses - truth
-        pose_err.append((wrap_degrees(diff) if wrap else diff).abs())
-    errors = torch.cat(pose_err)
+        return (wrap_degrees(diff) if wrap else diff).abs()
+
+    jobs = map_ordered(pose_error, recognized(), workers if pose_fn is not None else 0, kind="thread")
+    with contextlib.closing(jobs):  # an error ends the pool
+        errors = torch.cat(list(jobs))
+    n_ok, n_test = counts["ok"], counts["test"]
     return Score(
         accuracy=100.0 * n_ok / n_test,
         per_object=per_object,
