@@ -113,3 +113,19 @@ def test_worker_kind_follows_the_flow() -> None:
     ):
         assert _worker_kind(argparse.Namespace(worker_kind="auto", flow=flow)) == kind
     assert _worker_kind(argparse.Namespace(worker_kind="thread", flow="ilk")) == "thread"
+
+
+def test_auto_workers_for_the_geometric_pose(folder: CoilFolder) -> None:
+    """``--workers auto`` starts threads for a gallery without synthesis (sparse, dense)
+    only where they measure the poses (``--pose three-view``)."""
+    import argparse
+
+    from torch_eigview.apps.coil_command import _workers
+
+    args = argparse.Namespace(workers="auto", objects=[1, 2, 3])
+    want = min(available_cpus(), 3) if available_cpus() >= 2 else 0
+    with threads(1):
+        for method in ("sparse", "dense"):
+            assert _workers(args, CoilExperiment(method=method), folder) == 0
+            assert _workers(args, CoilExperiment(method=method, three_view_pose=True), folder) == want
+        assert _workers(args, CoilExperiment(), folder) == want

@@ -95,8 +95,8 @@ def _pose_tests(
 @pytest.mark.parametrize("workers", [1, 3])
 def test_score_runs_the_pose_function_over_worker_threads(workers: int) -> None:
     """``workers`` threads measure the poses (``pose_fn``), one object's views each: the
-    same scores, in the objects' order, as in this thread; each call sees the correctly
-    recognized views of one object only."""
+    same scores as in this thread; each call sees the correctly recognized views of one
+    object only."""
     import threading
 
     blocks = [(_views(4, 20 + k), k, [10.0 * k + j for j in range(4)]) for k in range(5)]
@@ -118,7 +118,8 @@ def test_score_runs_the_pose_function_over_worker_threads(workers: int) -> None:
     assert there.pose_mae_deg == here.pose_mae_deg and there.pose_median_deg == here.pose_median_deg
     # |rough + 0.25 k - (rough + 1)| over the recognized objects 0, 1, 3, 4.
     assert here.pose_mae_deg == pytest.approx(sum(abs(0.25 * k - 1.0) for k in (0, 1, 3, 4)) / 4)
-    assert [c[0] for c in calls] == [c[0] for c in here_calls] == [[0], [1], [3], [4]]
+    assert [c[0] for c in here_calls] == [[0], [1], [3], [4]]
+    assert sorted(c[0] for c in calls) == [[0], [1], [3], [4]]  # the threads start in any order
     assert all(name.startswith("eigview-job") for _, name in calls)
     assert all(name == threading.current_thread().name for _, name in here_calls)
 

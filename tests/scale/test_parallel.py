@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Iterator
 
 import pytest
 import torch
@@ -159,3 +160,21 @@ def test_nested_job_warnings_keep_the_outer_list() -> None:
 
     assert list(map_ordered(job, [()], 1, kind="thread", always=(UserWarning,))) == [["after inner"]]
     assert job() == ["after inner"]  # the same without a pool
+
+
+def _jobs_then_error(n: int) -> Iterator[tuple[int]]:
+    yield from ((i,) for i in range(n))
+    raise FileNotFoundError(f"no job {n}")
+
+
+@pytest.mark.parametrize("workers", [0, 2, 3])
+def test_an_error_reading_the_jobs_comes_after_the_jobs_before_it(workers: int) -> None:
+    """As in order: the jobs read before it yield their results, or the first one's error
+    (job 5's here), before the error of the jobs' iterable is raised."""
+    got: list[int] = []
+    with pytest.raises(FileNotFoundError, match="no job 4"):
+        for out in map_ordered(_job, _jobs_then_error(4), workers, kind="thread"):
+            got.append(out[0])
+    assert got == [0, 1, 2, 3]
+    with pytest.raises(ValueError, match="job 5 refuses"):
+        list(map_ordered(_job, _jobs_then_error(7), workers, kind="thread"))

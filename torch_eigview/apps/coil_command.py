@@ -137,7 +137,8 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         type=workers_arg,
         default="auto",
         metavar="N",
-        help="workers that synthesize the objects, one object and one torch thread each; auto "
+        help="workers that synthesize the objects (as threads, they also measure --pose three-view), "
+        "one object and one torch thread each; auto "
         "(default): one thread per CPU, or with --worker-kind process one process per CPU when the "
         "synthesis is large enough to repay their start-up (the full circle), else none",
     )
@@ -322,8 +323,8 @@ def _workers(args: argparse.Namespace, experiment: CoilExperiment, folder: CoilF
 
     if args.workers != "auto":
         return int(args.workers)
-    if experiment.method != "nvs" or folder.device.type != "cpu":
-        return 0
+    if (experiment.method != "nvs" and not experiment.three_view_pose) or folder.device.type != "cpu":
+        return 0  # no synthesis and no geometric pose: nothing to share out
     n_objects = len(folder.objects if args.objects is None else args.objects)  # checked by the run
     per_object = (
         math.ceil(360.0 / experiment.synth[2])  # the full circle, every synth step

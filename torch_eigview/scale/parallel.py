@@ -178,8 +178,10 @@ def map_ordered(
 ) -> Generator[R, None, None]:
     """``fn(*job)`` for each job, in the order of ``jobs``, over ``workers`` processes or threads.
 
-    At most ``2 · workers`` jobs are in flight (``jobs`` is consumed lazily), and an error
-    of ``fn`` is raised when its job's turn comes, after which the pool shuts down.
+    At most ``2 · workers`` jobs are in flight (``jobs`` is consumed lazily, in this
+    thread), and an error of ``fn`` is raised when its job's turn comes, after which the
+    pool shuts down. An error raised by ``jobs`` itself comes after the results (or the
+    error) of the jobs read before it, as in order.
     ``workers=0`` calls ``fn`` in this process.
 
     - ``kind="process"``: spawned processes, each with one torch thread; tensors travel
@@ -228,7 +230,18 @@ def map_ordered(
             return out if finish is None or kind == "thread" else finish(out)
 
         try:
-            for job in jobs:
+            source = iter(jobs)
+            while True:
+                try:
+                    job = next(source)
+                except StopIteration:
+                    break
+                except Exception:
+                    # Reading a job failed: the jobs before it come first, as they would
+                    # in order (their results, or the first one's error).
+                    while pending:
+                        yield collect()
+                    raise
                 pending.append(pool.submit(fn, *job))
                 if len(pending) >= 2 * workers:
                     yield collect()
