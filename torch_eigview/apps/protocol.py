@@ -200,8 +200,9 @@ def score(
             per_object[key] = 100.0 * float(ok.double().mean())
             counts["ok"] += int(ok.sum())
             counts["test"] += truth.shape[0]
-            # The pose error counts recognized views only.
-            yield views[ok.to(views.device)], result.labels[ok], result.poses[ok], truth[ok]
+            # The pose error counts recognized views only; only pose_fn reads their images.
+            picked = views[ok.to(views.device)] if pose_fn is not None else views
+            yield picked, result.labels[ok], result.poses[ok], truth[ok]
 
     def pose_error(
         views: torch.Tensor, labels: torch.Tensor, poses: torch.Tensor, truth: torch.Tensor
