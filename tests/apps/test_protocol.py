@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import pytest
 import torch
@@ -97,8 +98,6 @@ def test_score_runs_the_pose_function_over_worker_threads(workers: int) -> None:
     """``workers`` threads measure the poses (``pose_fn``), one object's views each: the
     same scores as in this thread; each call sees the correctly recognized views of one
     object only."""
-    import threading
-
     blocks = [(_views(4, 20 + k), k, [10.0 * k + j for j in range(4)]) for k in range(5)]
     x, labels, poses = stack_gallery(blocks)
     rec = build_recognizer(x, labels, poses, 6)

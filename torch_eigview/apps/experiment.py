@@ -268,11 +268,15 @@ class CoilExperiment:
         angles = None if layout is not None else self.synth_angles()
         return seeds, self.alpha, angles, self.synth[2], self.synthesis, self.overlap
 
+    def _cpu_workers(self, folder: CoilFolder) -> int:
+        """``workers`` for a run over ``folder``: the workers run on the CPU, none elsewhere."""
+        return self.workers if folder.device.type == "cpu" else 0
+
     def _synthesized(
         self, folder: CoilFolder, objects: list[int], ticks: Iterable[int], layout: CircleLayout | None
     ) -> Iterator[tuple[int, SynthesizedViews]]:
         """``(obj, views)`` of each object's ``nvs`` gallery, in order, over ``workers``."""
-        workers = self.workers if folder.device.type == "cpu" else 0  # the workers run on the CPU
+        workers = self._cpu_workers(folder)
         copy = workers > 0 and self.worker_kind == "process"
         jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
         return object_galleries(jobs, ticks, workers, self.worker_kind)
@@ -342,7 +346,7 @@ class CoilExperiment:
         else:
             test_poses = layout.tests
         tests = self._tests(folder, objects, test_poses, x.dtype)
-        threads = self.workers if folder.device.type == "cpu" and self.worker_kind == "thread" else 0
+        threads = self._cpu_workers(folder) if self.worker_kind == "thread" else 0
         result = score(
             recognizer,
             tests,
