@@ -43,6 +43,7 @@ COIL_EXAMPLES = [
     "coil20_recognition",
     "full_circle",
     "kernel_pca",
+    "pose_pair_choice",
     "train_frozen_features",
     "warp_augmentation",
 ]
@@ -89,6 +90,29 @@ def test_bench_synthesis(coil_root: Path) -> None:
         result["views"] == 3 * 41 and result["seconds"]["threads"] > 0 and result["seconds"]["one thread"] > 0
     )
     assert result["same_views"]
+
+
+@pytest.mark.coil
+def test_pose_pair_choice(coil_root: Path) -> None:
+    """The script's copy of the pair rule gives the library's poses (seed_pair_poses on the
+    same views and appearance poses)."""
+    import torch
+
+    from torch_eigview.datasets import CoilFolder
+    from torch_eigview.synthesis import SynthesisOptions, seed_pair_poses
+
+    result = load("pose_pair_choice").main(["--root", str(coil_root), "--objects", "1", "--every", "8"])
+    records, seeds = result["records"], result["seeds"]
+    assert len(records) >= 6  # 8 test poses of object 1, nearly all recognized
+    folder = CoilFolder(coil_root)
+    views = folder.images(1, [(seeds[0] + t) % 360 for t, _, _ in records])
+    rough = torch.tensor([seeds[0] + r for _, r, _ in records], dtype=torch.float64)
+    poses = seed_pair_poses(
+        views, rough, folder.images(1, seeds), seeds, closed=True, options=SynthesisOptions()
+    )
+    diff = (poses - torch.tensor(result["library_poses"], dtype=torch.float64) + 180) % 360 - 180
+    assert diff.abs().max() < 1e-6
+    assert {"library", "true sector (oracle)", "appearance"} <= set(result["rules"])
 
 
 @pytest.mark.coil
