@@ -43,7 +43,7 @@ from torch_eigview.geometry.view_pose import MIN_POINTS, chain_columns, fit_view
 from torch_eigview.scale import available_cpus, threads
 from torch_eigview.scale.parallel import map_ordered
 from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions
-from torch_eigview.synthesis.view_pose import _column_weight
+from torch_eigview.synthesis.view_pose import _column_weight  # view_angles' point weight
 from torch_eigview.warp.normalize import seed_foreground
 
 Measure = dict[str, float]  # theta (degrees from the pair's first seed), points, trusted
