@@ -38,6 +38,7 @@ import torch
 from torch_eigview.apps.cli_args import objects_arg
 from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets import CoilFolder, find_coil_root
+from torch_eigview.geometry.angles import wrap_degrees
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.view_pose import MIN_POINTS, chain_columns, fit_view_angle
 from torch_eigview.scale import available_cpus, threads
@@ -69,10 +70,6 @@ def measure(views: torch.Tensor, two: torch.Tensor, alpha: float, opts: Synthesi
         {"theta": float(t), "points": float(p), "trusted": float(s)}
         for t, p, s in zip(theta.tolist(), points.tolist(), trusted.tolist(), strict=True)
     ]
-
-
-def wrap(d: float) -> float:
-    return (d + 180.0) % 360.0 - 180.0
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
@@ -144,8 +141,10 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
                     out = pose(other)
         return out
 
-    def best(key: str, near_only: bool) -> Callable[[float, dict[int, Measure]], float]:
-        def rule(rough: float, cand: dict[int, Measure]) -> float:
+    Rule = Callable[[float, float, dict[int, Measure]], float]  # (truth, appearance pose, pairs)
+
+    def best(key: str, near_only: bool) -> Rule:
+        def rule(truth: float, rough: float, cand: dict[int, Measure]) -> float:
             near = -1 if rough % step < step / 2 else 1
             offs = (0, near) if near_only else (-1, 0, 1)
             ok = [cand[o] for o in offs if not math.isnan(cand[o]["theta"])]
@@ -159,12 +158,12 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
             return library(rough, cand)
         return pose(inside[0])
 
-    rules: dict[str, Callable[[float, float, dict[int, Measure]], float]] = {
+    rules: dict[str, Rule] = {
         "library": lambda t, r, c: library(r, c),
-        "most points (appearance pair, nearer neighbour)": lambda t, r, c: best("points", True)(r, c),
-        "most points (all three)": lambda t, r, c: best("points", False)(r, c),
-        "most trusted (appearance pair, nearer neighbour)": lambda t, r, c: best("trusted", True)(r, c),
-        "most trusted (all three)": lambda t, r, c: best("trusted", False)(r, c),
+        "most points (appearance pair, nearer neighbour)": best("points", True),
+        "most points (all three)": best("points", False),
+        "most trusted (appearance pair, nearer neighbour)": best("trusted", True),
+        "most trusted (all three)": best("trusted", False),
         "true sector (oracle)": oracle,
         "appearance": lambda t, r, c: r,
     }
@@ -179,7 +178,11 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     print(f"{'rule':50s} {'mean':>7s} {'median':>7s} {'> 20 deg':>9s}")
     table: dict[str, dict[str, float]] = {}
     for name, rule in rules.items():
-        errors = [abs(wrap(rule(t, r, c) - t)) for t, r, c in records]
+        errors = (
+            wrap_degrees(torch.tensor([rule(t, r, c) - t for t, r, c in records], dtype=torch.float64))
+            .abs()
+            .tolist()
+        )
         row = table[name] = {
             "mean": statistics.fmean(errors),
             "median": statistics.median(errors),
