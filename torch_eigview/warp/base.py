@@ -235,18 +235,19 @@ def _sample_views(
     ox, oy = (0.0 if w == 1 else 1.0), (0.0 if h == 1 else 1.0)
     ys = torch.arange(h, dtype=dtype, device=device).view(h, 1) if src_y is None else src_y.to(dtype)
     xs = src_x.to(dtype)
-    gy = ys * fy - oy
     if dtype in (torch.float32, torch.float64) and not (
-        torch.is_grad_enabled() and (xs.requires_grad or gy.requires_grad)
+        torch.is_grad_enabled() and (xs.requires_grad or ys.requires_grad)
     ):
-        # The (x, y) pairs interleaved by a complex tensor in one pass (writing each half
-        # of an empty grid is a slower strided pass each), then x normalized in place: the
-        # grid is the only full-size buffer, which keeps a call's peak of memory low.
-        grid = torch.view_as_real(torch.complex(xs, gy.expand_as(xs)))
-        gx = grid[..., 0]
-        torch.mul(gx, fx, out=gx).sub_(ox)
+        # One plane per coordinate, each written in one contiguous pass, and read through a
+        # permuted view as (…, 2) pairs (grid_sample reads it as fast as an interleaved grid,
+        # which costs a strided pass or a complex interleave to write). The planes are the
+        # only full-size buffer, which keeps a call's peak of memory low.
+        planes = xs.new_empty((2, *xs.shape))
+        torch.mul(xs, fx, out=planes[0]).sub_(ox)
+        torch.mul(ys.expand_as(xs), fy, out=planes[1]).sub_(oy)
+        grid = planes.movedim(0, -1)
     else:
-        grid = torch.stack([xs * fx - ox, gy.expand_as(xs)], dim=-1)
+        grid = torch.stack([xs * fx - ox, (ys * fy - oy).expand_as(xs)], dim=-1)
     return [
         F.grid_sample(
             v, grid[i].view(b, t * h, w, 2), mode="bilinear", padding_mode="zeros", align_corners=True
