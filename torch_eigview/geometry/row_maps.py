@@ -61,7 +61,7 @@ def invert_row_map(
     fields = [dst_x_for_src] if depth is None else [dst_x_for_src, depth]
     parts: Parts = []
     if n_seg and 2 * n_seg >= seg_ok.numel():
-        parts = _dense_columns(fields, seg_ok)
+        parts = _dense_columns(fields, seg_ok, length)
     elif n_seg:
         # (row, k) pairs straight from the 2-D nonzero: no integer division of flat indices.
         row, k = seg_ok.reshape(-1, w - 1).nonzero().unbind(1)
@@ -109,9 +109,10 @@ def invert_row_segments(
     if len(shape) != 4:
         raise ValueError(f"shape must be (B, T, H, W), got {tuple(shape)}")
     ends = [dst_ends] if depth_ends is None else [dst_ends, depth_ends]
-    keep = ((f1 - f0) > 0) & ((f1 - f0) <= max_stretch)
-    parts = _sparse_columns(row, k, ends, keep, shape[-1], math.prod(shape))
-    del keep
+    length = f1 - f0
+    keep = (length > 0) & (length <= max_stretch)
+    parts = _sparse_columns(row, k, ends, keep, shape[-1], math.prod(shape), length)
+    del keep, length
     return _z_buffer(parts, tuple(shape), f0.dtype, f0.device, fallback)
 
 
@@ -155,22 +156,26 @@ def _winners(
     return out, best[:n] != -math.inf
 
 
-def _dense_columns(fields: list[torch.Tensor], seg_ok: torch.Tensor) -> Parts:
+def _dense_columns(fields: list[torch.Tensor], seg_ok: torch.Tensor, length: torch.Tensor) -> Parts:
     """:func:`_columns` when most segments pass (a view's object fills it): slot 0 on views
-    of the whole map, a refused segment sending key -inf to a spare pixel."""
+    of the whole map, a refused segment sending key -inf to a spare pixel; ``length`` the
+    segments' lengths, (B, T, H, W - 1)."""
     b, t, h, w = fields[0].shape
     dtype, device, w1 = fields[0].dtype, fields[0].device, w - 1
     ends = [(v[..., :-1], v[..., 1:]) for v in fields]
     k = torch.arange(w1, dtype=dtype, device=device)
     row_start = torch.arange(b * t * h, device=device).view(b, t, h, 1) * w
-    # A non-finite end (map or depth) is no surface.
-    finite = _all_finite(fields)
-    ok = seg_ok & finite[..., :-1] & finite[..., 1:]
+    # A non-finite end (map or depth) is no surface; a finite sum of the maps proves every
+    # value finite (as in _sparse_columns), the common case's shortcut.
+    ok = seg_ok
+    if not math.isfinite(float(sum(v.sum() for v in fields))):
+        finite = _all_finite(fields)
+        ok = seg_ok & finite[..., :-1] & finite[..., 1:]
 
     def locate(cand: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return (cand % w1).to(dtype), (cand // w1) * w
 
-    return _columns(ends, k, row_start, ok, w, fields[0].numel(), locate)
+    return _columns(ends, k, row_start, ok, w, fields[0].numel(), locate, length)
 
 
 def _sparse_columns(
@@ -180,10 +185,12 @@ def _sparse_columns(
     keep: torch.Tensor | None,
     w: int,
     n: int,
+    length: torch.Tensor | None = None,
 ) -> Parts:
     """:func:`_columns` when few segments pass (a background around the object): only the
     segments in (``row``, ``k_int``), their ``ends`` gathered; ``keep`` the ones that pass
-    the order and length tests (None: all); ``n`` the spare pixel, B·T·H·W."""
+    the order and length tests (None: all); ``n`` the spare pixel, B·T·H·W; ``length``
+    the segments' lengths where the caller has them."""
     f0 = ends[0][0]
     row_start = row * w
     k = k_int.to(f0.dtype)
@@ -197,7 +204,7 @@ def _sparse_columns(
     def locate(cand: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return k.index_select(0, cand), row_start.index_select(0, cand)
 
-    return _columns(ends, k, row_start, ok, w, n, locate)
+    return _columns(ends, k, row_start, ok, w, n, locate, length)
 
 
 def _columns(
@@ -208,6 +215,7 @@ def _columns(
     w: int,
     n: int,
     locate: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+    length: torch.Tensor | None = None,
 ) -> Parts:
     """Every (segment, target column) pair of :func:`invert_row_map`, flat.
 
@@ -225,6 +233,7 @@ def _columns(
         ok: bool, the segments that pass, or None (all).
         w: the row length W; ``n``: the spare pixel, B·T·H·W.
         locate: flat indices of the segments (``cand``) → their ``(k, row_start)``.
+        length: ``f1 - f0`` where the caller has it, or None (computed here).
 
     Returns:
         One ``(idx, key, src)`` per slot m, each (P_m,): the flat target pixel (or the
@@ -232,7 +241,7 @@ def _columns(
     """
     (f0, f1), dd = ends[0], (ends[1] if len(ends) > 1 else None)
     # In place where it can: fewer large temporaries per call, the same values.
-    length = f1 - f0
+    length = f1 - f0 if length is None else length
     col0 = torch.ceil(f0).clamp_(min=0)
     room = torch.floor(f1).clamp_(max=w - 1).sub_(col0)
     if ok is not None:
