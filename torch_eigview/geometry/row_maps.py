@@ -56,7 +56,9 @@ def invert_row_map(
     f0, f1 = dst_x_for_src[..., :-1], dst_x_for_src[..., 1:]
     length = f1 - f0
     valid = valid[:, None] if valid.ndim == 3 else valid
-    seg_ok = (valid[..., :-1] & valid[..., 1:]) & (length > 0) & (length <= max_stretch)
+    seg_ok = length > 0
+    seg_ok &= length <= max_stretch
+    seg_ok &= valid[..., :-1] & valid[..., 1:]
     n_seg = int(seg_ok.count_nonzero())
     fields = [dst_x_for_src] if depth is None else [dst_x_for_src, depth]
     parts: Parts = []
@@ -360,12 +362,19 @@ def _fill_gaps(
     n = gaps[:, 1, 1] + 1
     count = n - p - 1
     total = int(count.sum())
-    g = torch.repeat_interleave(torch.arange(count.numel(), device=src.device), count, output_size=total)
-    start = (count.cumsum(0) - count).index_select(0, g)
-    p, n, base = p.index_select(0, g), n.index_select(0, g), row.index_select(0, g) * w
-    col = p + 1 + (torch.arange(total, device=src.device) - start)
+    # Per gap first (its hits, their difference, its span), then spread over its holes:
+    # the per-hole work is a few gathers and the interpolation itself.
     flat = src.reshape(-1)
-    sp, sn = flat.index_select(0, base + p), flat.index_select(0, base + n)
+    at = row * w + p  # the hit before each gap, flat
+    sp = flat.index_select(0, at)
     # Column differences in integers (exact in any float dtype, half precision included).
-    step, span = (col - p).to(src.dtype), (n - p).to(src.dtype)
-    out.view(-1).index_copy_(0, base + col, sp + (sn - sp) * step / span)
+    diff, span = flat.index_select(0, at + (n - p)) - sp, (n - p).to(src.dtype)
+    g = torch.repeat_interleave(torch.arange(count.numel(), device=src.device), count, output_size=total)
+    step = torch.arange(1, total + 1, device=src.device).sub_((count.cumsum(0) - count).index_select(0, g))
+    # sp + (sn - sp) * step / span, hole by hole.
+    value = (
+        (diff.index_select(0, g) * step.to(src.dtype))
+        .div_(span.index_select(0, g))
+        .add_(sp.index_select(0, g))
+    )
+    out.view(-1).index_copy_(0, at.index_select(0, g).add_(step), value)

@@ -244,8 +244,9 @@ class RowGeometry:
             return inverse
         big_x, x2c = (x1 - c)[:, None], (x2 - c)[:, None]
         big_z = (x2c - big_x * math.cos(al)) / math.sin(al)
-        dst_x_for_src = c + self.a * big_x + self.b * x2c
-        depth = self.sign * (big_z * torch.cos(th) - big_x * torch.sin(th))
+        # Eq. 2 and the depth on the whole grid, in place where it can (the same values).
+        dst_x_for_src = (self.a * big_x).add_(c).add_(self.b * x2c)
+        depth = (big_z * torch.cos(th)).sub_(big_x * torch.sin(th)).mul_(self.sign)
         return invert_row_map(dst_x_for_src, valid[:, None] | own, depth, self.max_stretch, fallback=fallback)
 
     def _split_own(
