@@ -252,19 +252,20 @@ def _columns(
     src0, key0 = _interpolate((col0 - f0).div_(length), k, dd)
     idx0 = col0.clamp(max=w - 1).long().add_(row_start).masked_fill_(~ok0, n).reshape(-1)
     parts = [(idx0, torch.where(ok0, key0, -math.inf).reshape(-1), src0.reshape(-1))]
-    flat = [v.reshape(-1) for v in (col0, f0, length, room)]
-    flat_depth = None if dd is None else (dd[0].reshape(-1), dd[1].reshape(-1))
-    cand = (flat[3] >= 1).nonzero().squeeze(1)
+    # Fresh tensors, so flat views; the ends are read at the candidates with torch.take,
+    # since on the dense path they are strided views of the maps (no copy of them).
+    c0_flat, len_flat, room_flat = (v.reshape(-1) for v in (col0, length, room))
+    cand = (room_flat >= 1).nonzero().squeeze(1)
     m = 1
     while cand.numel():
-        c0, s0, ln = (v.index_select(0, cand) for v in flat[:3])
+        c0, ln, s0 = c0_flat.index_select(0, cand), len_flat.index_select(0, cand), torch.take(f0, cand)
         col = c0 + m
         lo, start = locate(cand)
-        sel = None if flat_depth is None else (flat_depth[0][cand], flat_depth[1][cand])
+        sel = None if dd is None else (torch.take(dd[0], cand), torch.take(dd[1], cand))
         src_m, key_m = _interpolate((col - s0) / ln, lo, sel)
         parts.append((start + col.long(), key_m, src_m))
         m += 1
-        cand = cand[flat[3].index_select(0, cand) >= m]
+        cand = cand[room_flat.index_select(0, cand) >= m]
     return parts
 
 

@@ -149,7 +149,11 @@ def _refine_2d(
         part = torch.sub(base[0], torch.mul(base[1], g, out=bufs[5]), out=bufs[5])
         return torch.addcmul(part, base[2], d, value=-1, out=bufs[out])
 
-    sx, sy = src_x, yy - (ky_g * (xx - c) + ky_d * disparity[:, None])
+    sx, shift = src_x, ky_g * (xx - c)
+    if bufs is None:
+        sy = yy - (shift + ky_d * disparity[:, None])
+    else:  # the first step writes buffers 0 and 2
+        sy = torch.sub(yy, torch.mul(ky_d, disparity[:, None], out=bufs[3]).add_(shift), out=bufs[3])
     for i in range(iters):
         d = sample(sx, sy, 1)[:, :, 0]
         g = sx.clamp(0, w - 1) if bufs is None else torch.clamp(sx, 0, w - 1, out=bufs[4])
@@ -160,9 +164,16 @@ def _refine_2d(
         if done:
             break
     s = sample(sx, sy)
-    g = sx.clamp(0, w - 1)
+    d = s[:, :, 0]
     # sx + dx - xx = sx - (x - dx) at the sampled disparity.
-    residual = (sx - step(x_at, g, s[:, :, 0])).abs() + (sy - step(y_at, g, s[:, :, 0])).abs()
+    if bufs is None:
+        g = sx.clamp(0, w - 1)
+        residual = (sx - step(x_at, g, d)).abs() + (sy - step(y_at, g, d)).abs()
+    else:  # the halves go to the buffers that hold neither sx nor sy
+        g = torch.clamp(sx, 0, w - 1, out=bufs[4])
+        rx = step(x_at, g, d, 0 if bufs[0] is not sx else 1)
+        ry = step(y_at, g, d, 2 if bufs[2] is not sy else 3)
+        residual = torch.sub(sx, rx, out=rx).abs_().add_(torch.sub(sy, ry, out=ry).abs_())
     inside = (g == sx) & (sy == sy.clamp(0, h - 1))  # NaN is outside: NaN != NaN
     return sx, sy, ((s[:, :, 1] > 0.999) | own) & inside & (residual < 0.5)
 
