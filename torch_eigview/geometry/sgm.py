@@ -38,23 +38,27 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
     n, n_labels, s, x = c.shape
     order = range(s - 1, -1, -1) if reverse else range(s)
     # The previous step's costs between two +inf labels: its label neighbours k ± 1 are
-    # slices of one buffer, and each step writes in place (no per-step allocations).
+    # slices of one buffer, and each step writes in place (no per-step allocations). The
+    # penalties are 0-dim tensors of the volume's dtype (a Python number is converted on
+    # every call: the same sums, a tenth slower) and the positions' slices are taken once.
     padded = torch.full((n, n_labels + 2, x), float("inf"), dtype=c.dtype, device=c.device)
     prev = padded[:, 1:-1]
     low = torch.empty_like(prev[:, :1])
     jump = torch.empty_like(low)
     step = torch.empty_like(prev)
-    prev.copy_(c[:, :, order[0]])
-    acc[:, :, order[0]] += prev
+    pen1, pen2 = (torch.tensor(p, dtype=c.dtype, device=c.device) for p in (p1, p2))
+    costs, sums = c.unbind(2), acc.unbind(2)
+    prev.copy_(costs[order[0]])
+    sums[order[0]].add_(prev)
     for t in order[1:]:
         torch.amin(prev, dim=1, keepdim=True, out=low)
         torch.minimum(padded[:, 2:], padded[:, :-2], out=step)
-        step.add_(p1)
+        step.add_(pen1)
         torch.minimum(step, prev, out=step)
-        torch.minimum(step, torch.add(low, p2, out=jump), out=step)
-        torch.add(c[:, :, t], step, out=prev)
+        torch.minimum(step, torch.add(low, pen2, out=jump), out=step)
+        torch.add(costs[t], step, out=prev)
         prev.sub_(low)
-        acc[:, :, t] += prev
+        sums[t].add_(prev)
 
 
 def winner(volume: torch.Tensor) -> torch.Tensor:

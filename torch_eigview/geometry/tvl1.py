@@ -169,7 +169,10 @@ def _level(
     f1 = dt / tightness
     tol_level = tol * h * w
     flow = flow.clone()
-    g = flow.new_zeros(n, 2, h, w)  # the last row / column of each difference stays 0
+    # Both flow components at once (they do not interact in the regularization: half the
+    # tensor calls of one component at a time, the same values). ``g`` holds each
+    # component's differences along rows and columns; their last row / column stays 0.
+    g = flow.new_zeros(n, 2, 2, h, w)
     proj = flow.new_zeros(n, 2, 2, h, w)  # the dual variable per flow component and axis
     active = torch.ones(n, dtype=torch.bool, device=flow.device)
     for _ in range(num_warp):
@@ -181,30 +184,32 @@ def _level(
         ni = torch.where(ni == 0, 1.0, ni)
         gy, gx = grad[:, 0], grad[:, 1]
         rho_0 = warped - reference - gy * flow[:, 0] - gx * flow[:, 1]
+        bound = f0 * ni  # the data step's threshold, fixed over the warp
         start = flow
         after_first_data = flow
         for it in range(num_iter):
             # Data term: the thresholding step of TV-L1.
             rho = torch.addcmul(torch.addcmul(rho_0, gy, flow[:, 0]), gx, flow[:, 1])
-            step = torch.where(rho.abs() <= f0 * ni, rho / ni, f0 * torch.sign(rho))
+            step = torch.where(rho.abs() <= bound, rho / ni, f0 * torch.sign(rho))
             aux = torch.addcmul(flow, step[:, None], grad, value=-1)
             if it == 0:
                 after_first_data = aux
-            # Regularization: Chambolle's projection, twice per component.
-            flow = aux.clone()
-            for c in range(2):
-                fc, p = flow[:, c], proj[:, c]
-                for _ in range(_REG_ITERS):
-                    torch.diff(fc, dim=1, out=g[:, 0, :-1])
-                    torch.diff(fc, dim=2, out=g[:, 1, :, :-1])
-                    norm = torch.hypot(g[:, 0], g[:, 1]).mul_(f1).add_(1.0)
-                    p.sub_(g, alpha=dt).div_(norm[:, None])
-                    # The flow plus the divergence of p (backward differences, p's last
-                    # row / column taken as 0 beyond the edge).
-                    torch.sub(aux[:, c], p[:, 0], out=fc)
-                    fc.sub_(p[:, 1])
-                    fc[:, 1:] += p[:, 0, :-1]
-                    fc[:, :, 1:] += p[:, 1, :, :-1]
+            # Regularization: Chambolle's projection, twice, both components at once; the
+            # first differences are aux's (the flow before the projection).
+            flow = torch.empty_like(aux)
+            current = aux
+            for _ in range(_REG_ITERS):
+                torch.diff(current, dim=2, out=g[:, :, 0, :-1])
+                torch.diff(current, dim=3, out=g[:, :, 1, :, :-1])
+                norm = torch.hypot(g[:, :, 0], g[:, :, 1]).mul_(f1).add_(1.0)
+                proj.sub_(g, alpha=dt).div_(norm[:, :, None])
+                # The flow plus the divergence of p (backward differences, p's last
+                # row / column taken as 0 beyond the edge).
+                torch.sub(aux, proj[:, :, 0], out=flow)
+                flow.sub_(proj[:, :, 1])
+                flow[:, :, 1:].add_(proj[:, :, 0, :-1])
+                flow[:, :, :, 1:].add_(proj[:, :, 1, :, :-1])
+                current = flow
         change = (after_first_data - flow).square().sum((1, 2, 3))
         flow = torch.where(active.view(n, 1, 1, 1), flow, start)
         active = active & ~(change < tol_level)
