@@ -71,6 +71,23 @@ def test_warnings_and_errors_name_the_object(
         CoilExperiment(alpha=10.0, objects=[7, 8], workers=workers, worker_kind="thread").run(folder)
 
 
+@pytest.mark.parametrize("workers", [0, 2])
+def test_elevation_warnings_of_batched_flows_name_their_object(
+    folder: CoilFolder, monkeypatch: pytest.MonkeyPatch, workers: int
+) -> None:
+    """The objects of a pool job share their flows (one batched call), yet each elevation
+    fallback is re-issued with its own object, in the objects' order."""
+    import torch_eigview.synthesis.seed_pairs as seed_pairs
+
+    objects = [2, 5, 11]
+    monkeypatch.setattr(seed_pairs, "estimate_elevation", lambda *a, **k: torch.tensor([90.0]))
+    with pytest.warns(ElevationFallbackWarning) as record:
+        CoilExperiment(alpha=10.0, objects=objects, workers=workers, worker_kind="thread").run(folder)
+    messages = [str(w.message) for w in record if issubclass(w.category, ElevationFallbackWarning)]
+    assert [m.split(":")[0] for m in messages] == [f"object {o}" for o in objects]
+    assert all("the fit gave elevation=90" in m for m in messages)
+
+
 def test_worker_policy() -> None:
     """Processes only for a synthesis worth their start-up, threads whenever there are two
     objects; at most one per object and CPU."""

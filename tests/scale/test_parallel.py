@@ -11,7 +11,7 @@ import torch
 
 from torch_eigview.apps.bench_scaling import smooth_views
 from torch_eigview.scale.job_warnings import job_warnings
-from torch_eigview.scale.parallel import map_ordered, synthesize_objects
+from torch_eigview.scale.parallel import GROUP_OBJECTS, group_size, grouped, map_ordered, synthesize_objects
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
 
 THETAS = [-6.0, -2.0, 0.0, 2.5, 5.0, 9.0]
@@ -178,3 +178,32 @@ def test_an_error_reading_the_jobs_comes_after_the_jobs_before_it(workers: int) 
     assert got == [0, 1, 2, 3]
     with pytest.raises(ValueError, match="job 5 refuses"):
         list(map_ordered(_job, _jobs_then_error(7), workers, kind="thread"))
+
+
+def test_group_size_and_grouped() -> None:
+    """Jobs of at most GROUP_OBJECTS objects, as many per worker; the grouping reads its
+    items lazily and raises a reading error after the group read before it."""
+    assert [group_size(n, 2) for n in (1, 2, 3, 16, 20, 100)] == [1, 1, 2, 8, 5, 8]
+    assert [group_size(n, 0) for n in (1, 8, 9, 20)] == [1, 8, 5, 7]
+    assert all(group_size(n, w) <= GROUP_OBJECTS for n in range(1, 60) for w in range(0, 5))
+    assert list(grouped(range(7), 3)) == [[0, 1, 2], [3, 4, 5], [6]]
+    assert list(grouped([], 3)) == []
+    got: list[list[int]] = []
+    with pytest.raises(FileNotFoundError, match="no job 4"):
+        for group in grouped((i for (i,) in _jobs_then_error(4)), 3):
+            got.append(group)
+    assert got == [[0, 1, 2], [3]]
+
+
+def test_a_group_gives_each_objects_views_or_its_error() -> None:
+    """Objects synthesized as one group (their flows batched) give the views each gives
+    alone; an object refused in the middle of a group is an error at its turn."""
+    seeds = seeds_of(4)
+    alone = [synthesize_views(s, 5.0, THETAS) for s in seeds]
+    for got, want in zip(synthesize_objects(seeds, 5.0, THETAS, workers=0), alone, strict=True):
+        assert torch.equal(got.views, want.views) and got.elevations == want.elevations
+    got = []
+    with pytest.raises(ValueError, match="at least 2 views"):
+        for views in synthesize_objects([seeds[0], seeds[1], seeds[2][:1], seeds[3]], 5.0, THETAS):
+            got.append(views)
+    assert [torch.equal(g.views, a.views) for g, a in zip(got, alone, strict=False)] == [True, True]

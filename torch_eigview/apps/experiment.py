@@ -55,7 +55,7 @@ from torch_eigview.check import (
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.geometry.angles import wrap_angle
-from torch_eigview.scale.parallel import KINDS
+from torch_eigview.scale.parallel import KINDS, group_size
 from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
@@ -279,7 +279,7 @@ class CoilExperiment:
         workers = self._cpu_workers(folder)
         copy = workers > 0 and self.worker_kind == "process"
         jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
-        return object_galleries(jobs, ticks, workers, self.worker_kind)
+        return object_galleries(jobs, ticks, workers, self.worker_kind, group_size(len(objects), workers))
 
     def _galleries(
         self,

@@ -32,7 +32,7 @@ from torch_eigview.geometry.correspondence import Correspondence, correspondence
 from torch_eigview.geometry.row_matcher import check_row_options, epipolar_matches, match_rows
 from torch_eigview.geometry.tvl1 import check_range, diverged, tvl1_flow, warp_by_flow
 
-__all__ = ["MIN_SIDE", "PRIOR_SIDE", "ROW_OPTIONS", "TVL1_OPTIONS", "guided_tvl1"]
+__all__ = ["MIN_SIDE", "PRIOR_SIDE", "ROW_OPTIONS", "TVL1_OPTIONS", "guided_tvl1", "prior_reduction"]
 
 #: The smallest image side the row matcher takes (its line model is searched at quarter
 #: resolution); on smaller views, whose displacements are a pixel or two, the guided flow is
@@ -54,6 +54,15 @@ _ROW_DEFAULTS = {
 }
 #: Keyword arguments of :func:`guided_tvl1` that go to TV-L1.
 TVL1_OPTIONS = tuple(p for p in inspect.signature(tvl1_flow).parameters if p not in ("reference", "moving"))
+
+
+def prior_reduction(height: int, width: int) -> int:
+    """The power of two by which :func:`guided_tvl1` reduces (H, W) views for the row
+    matcher's prior: the smallest that brings the larger side to at most :data:`PRIOR_SIDE`."""
+    f = 1
+    while max(height, width) > PRIOR_SIDE * f:
+        f *= 2
+    return f
 
 
 def _check_views(view1: object, view2: object) -> tuple[torch.Tensor, torch.Tensor]:
@@ -115,9 +124,7 @@ def guided_tvl1(
     # each way): on large views it runs on views reduced by a power of two to at most
     # PRIOR_SIDE, and its matches are scaled back; TV-L1's pyramid, deeper on large views,
     # takes up the prior's coarser steps.
-    f = 1
-    while max(h, w) > PRIOR_SIDE * f:
-        f *= 2
+    f = prior_reduction(h, w)
     with torch.no_grad():
         # Float32 grayscale, view 1's then view 2's, as the row matcher and TV-L1 take them.
         gray = torch.cat([v1, v2]).detach().mean(dim=1, keepdim=True).float()

@@ -40,7 +40,7 @@ from torch_eigview.check import check_alpha, check_choice, check_int, check_numb
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.sgm import aggregate, winner
 
-__all__ = ["COSTS", "check_row_options", "epipolar_matches", "match_rows"]
+__all__ = ["COSTS", "check_row_options", "epipolar_matches", "match_rows", "volume_size"]
 
 COSTS = ("adgrad", "zncc")
 
@@ -347,6 +347,15 @@ def check_row_options(
     if center is not None:
         check_number(center, "center")
     return alpha, cost, patch, _tilt(elevation)
+
+
+def volume_size(height: int, width: int, alpha: float, depth: float | None = None) -> int:
+    """Elements of the cost volume :func:`match_rows` builds per view and direction for
+    (H, W) views ``alpha`` degrees apart, ``depth`` its largest ``|Z|`` (default ``W / 2``):
+    the labels ``2 ceil(depth |sin α|) + 1`` times the pixels. The matcher's memory is a few
+    such volumes per direction; its callers size their batches by it."""
+    reach = width / 2 if depth is None else float(depth)
+    return (2 * math.ceil(reach * abs(math.sin(math.radians(alpha)))) + 1) * height * width
 
 
 def epipolar_matches(

@@ -5,7 +5,8 @@ small torch operations that two OpenMP threads barely speed up). Objects are ind
 so the cheap way to use the machine's cores is one object per process:
 :func:`synthesize_objects` hands each object's seed views to a pool of ``workers``
 processes (one torch thread each) and yields the results in input order, with at most
-``2 · workers`` objects in flight (memory: that many objects' views, never all of them).
+``2 · workers`` jobs of a few objects each in flight (memory: that many objects' views,
+never all of them); the objects of a job share their flows' calls (batched over objects).
 Views come back through shared memory (torch's multiprocessing reductions), not pickles.
 
 The worker processes are *spawned* (a fresh interpreter each, never ``fork``: forking a
@@ -16,8 +17,10 @@ as for any ``multiprocessing`` code. ``workers=0`` runs everything in this proce
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
+import math
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
@@ -30,12 +33,21 @@ import torch.multiprocessing as mp
 from torch_eigview.check import as_angle_tensor, check_choice, check_int
 from torch_eigview.scale.job_warnings import routing
 from torch_eigview.scale.thread_policy import allowed_cpus
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_seeds, synthesize_views
+from torch_eigview.synthesis import (
+    SynthesisOptions,
+    SynthesizedViews,
+    check_seeds,
+    iter_object_geometries,
+    synthesize_views,
+)
 
 __all__ = [
+    "GROUP_OBJECTS",
     "KINDS",
     "PARALLEL_PIXELS",
     "available_cpus",
+    "group_size",
+    "grouped",
     "map_ordered",
     "object_workers",
     "own_views",
@@ -43,6 +55,7 @@ __all__ = [
 ]
 
 R = TypeVar("R")
+T = TypeVar("T")
 
 #: What :func:`map_ordered` runs its jobs in.
 KINDS = ("process", "thread")
@@ -100,12 +113,13 @@ def synthesize_objects(
     *,
     workers: int = 0,
     kind: str = "process",
+    group: int = 4,
 ) -> Iterator[SynthesizedViews]:
     """:func:`~torch_eigview.synthesis.synthesize_views` for each object, over ``workers`` processes or threads.
 
     Args:
         objects: iterable of (V, C, H, W) seed views, one entry per object (consumed
-            lazily: at most ``2 · workers`` objects are read ahead).
+            lazily: at most ``2 · workers`` groups of objects are read ahead).
         alpha: angle between consecutive seed views in degrees, or one angle per seed pair;
             the same for every object.
         thetas: (T,) novel angles in degrees from the first seed view.
@@ -115,6 +129,8 @@ def synthesize_objects(
         kind: ``"process"`` (spawned, one torch thread each) or ``"thread"`` (threads of
             this process: no start-up cost; run them under ``threads(1)``), see
             :func:`map_ordered`.
+        group: objects per job (>= 1), their seed pairs' flows batched (the same views;
+            a worker thread calls torch a few times per batch instead of per object).
 
     Yields:
         One :class:`~torch_eigview.synthesis.SynthesizedViews` per object, in the order
@@ -136,6 +152,7 @@ def synthesize_objects(
     """
     workers = check_int(workers, "workers", minimum=0)  # 0: synthesize in this process
     kind = check_choice(kind, "kind", KINDS)
+    group = check_int(group, "group", minimum=1)
     if options is not None and not isinstance(options, SynthesisOptions):
         raise TypeError(f"options must be a SynthesisOptions or None, got {type(options).__name__}")
     angles = as_angle_tensor(thetas, "thetas").tolist()  # checked here, not in a worker
@@ -148,16 +165,90 @@ def synthesize_objects(
     # A copy: sending a tensor moves its whole storage into shared memory, and the caller's
     # tensor (or the larger tensor it is a view of) with it.
     copy = workers and kind == "process"
-    jobs = (
-        (
-            _as_seeds(seeds) if not copy else _as_seeds(seeds).detach().to("cpu", copy=True),
-            alpha,
-            angles,
-            options,
-        )
+    seeds = (
+        _as_seeds(seeds) if not copy else _as_seeds(seeds).detach().to("cpu", copy=True)
         for seeds in itertools.chain([first], it)
     )
-    yield from map_ordered(synthesize_views, jobs, workers, finish=own_views, kind=kind)
+    jobs = ((objs, alpha, angles, options) for objs in grouped(seeds, group))
+    results = map_ordered(_synthesize_group, jobs, workers, finish=_own_group, kind=kind)
+    with contextlib.closing(results):  # closing this generator ends the pool
+        for outcomes in results:
+            for out in outcomes:
+                if isinstance(out, Exception):
+                    raise out
+                yield out
+
+
+def _synthesize_group(
+    objects: list[torch.Tensor],
+    alpha: float | Sequence[float],
+    angles: list[float],
+    options: SynthesisOptions | None,
+) -> list[SynthesizedViews | Exception]:
+    """:func:`~torch_eigview.synthesis.synthesize_views` of each object, the seed pairs'
+    flows of all of them batched (:func:`~torch_eigview.synthesis.iter_object_geometries`:
+    the same views), or the error that refused an object, in its place (the objects
+    before it are the caller's to yield first)."""
+    try:
+        records = iter_object_geometries(objects, alpha, options)
+        views: list[SynthesizedViews | Exception] = [
+            synthesize_views(s, alpha, angles, options, geometry=next(records)) for s in objects
+        ]
+    except Exception:  # an object the flows or the warp refuse: each alone, its error in its place
+        return [_synthesize_alone(s, alpha, angles, options) for s in objects]
+    return views
+
+
+def _synthesize_alone(
+    seeds: torch.Tensor, alpha: float | Sequence[float], angles: list[float], options: SynthesisOptions | None
+) -> SynthesizedViews | Exception:
+    try:
+        return synthesize_views(seeds, alpha, angles, options)
+    except Exception as exc:  # raised in the caller's thread at this object's turn
+        return exc
+
+
+def _own_group(outcomes: list[SynthesizedViews | Exception]) -> list[SynthesizedViews | Exception]:
+    """A worker process's group with its views copied out of shared memory."""
+    return [out if isinstance(out, Exception) else own_views(out) for out in outcomes]
+
+
+#: At most this many objects share one job of the commands' synthesis
+#: (:func:`group_size`): their flows are batched
+#: (:func:`~torch_eigview.synthesis.object_geometries`), and a job's views are held
+#: until it returns. With two worker threads four objects per call take most of the gain
+#: (see :data:`~torch_eigview.synthesis.seed_pairs.FLOW_BATCH_CPU`); eight let 20 objects
+#: go to two workers as four equal jobs.
+GROUP_OBJECTS = 8
+
+
+def group_size(n_objects: int, workers: int) -> int:
+    """Objects per job for ``n_objects`` over ``workers`` (0: this process): as few jobs as
+    :data:`GROUP_OBJECTS` allows, in a multiple of the workers so that they finish together
+    (20 objects over 2 workers: 4 jobs of 5)."""
+    slots = max(1, workers)
+    jobs = slots * max(1, math.ceil(n_objects / (slots * GROUP_OBJECTS)))
+    return max(1, math.ceil(n_objects / jobs))
+
+
+def grouped(items: Iterable[T], size: int) -> Iterator[list[T]]:
+    """``items`` in lists of ``size`` (the last one shorter), read lazily; an error raised
+    while reading an item comes after the list of the items read before it."""
+    it = iter(items)
+    while True:
+        group: list[T] = []
+        try:
+            for _ in range(size):
+                group.append(next(it))
+        except StopIteration:
+            if group:
+                yield group
+            return
+        except Exception:
+            if group:
+                yield group
+            raise
+        yield group
 
 
 def own_views(out: SynthesizedViews) -> SynthesizedViews:

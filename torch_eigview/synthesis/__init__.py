@@ -30,6 +30,7 @@ from torch_eigview.synthesis.seed_pairs import (
     ElevationFallbackWarning,
     PairGeometry,
     check_seeds,
+    iter_object_geometries,
     object_geometries,
     pair_geometry,
 )
@@ -43,6 +44,7 @@ __all__ = [
     "SynthesisOptions",
     "SynthesizedViews",
     "check_seeds",
+    "iter_object_geometries",
     "object_geometries",
     "pair_geometry",
     "pair_of",

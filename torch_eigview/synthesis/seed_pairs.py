@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import torch
@@ -19,15 +19,19 @@ from torch_eigview.check import check_finite, check_float_tensor, check_ndim
 from torch_eigview.geometry.angles import pair_angles
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
+from torch_eigview.geometry.guided_flow import prior_reduction
 from torch_eigview.geometry.pose import estimate_elevation
+from torch_eigview.geometry.row_matcher import volume_size
 from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.warp.normalize import seed_foreground
 
 __all__ = [
+    "FLOW_BATCH_CPU",
     "MAX_AUTO_ELEVATION",
     "ElevationFallbackWarning",
     "PairGeometry",
     "check_seeds",
+    "iter_object_geometries",
     "object_geometries",
     "pair_geometry",
 ]
@@ -40,6 +44,16 @@ MAX_AUTO_ELEVATION = 89.0
 #: The flows that :func:`object_geometries` batches over objects: TV-L1 in one call, the
 #: row matcher and the guided flow in one call per angle between seeds.
 _BATCHED = ("tvl1", "rows", "guided")
+
+#: Cost-volume elements (both directions of every pair) one row-matcher call of
+#: :func:`object_geometries` takes on the CPU: 5 pairs of 128 × 128 views at α = 10°,
+#: 9 at 5°, one at 45°. A call costs the same Python and dispatch per tensor operation
+#: whatever the batch (about 14,000 operations for the guided flow of one pair), which
+#: worker threads pay in turn under the GIL: on two threads 20 objects' flows at α = 10
+#: took 1.0–1.3 s in batches of 4–10 pairs against 1.95–2.25 s one pair at a time (2.0–2.2 s
+#: on one thread either way). Larger batches gain little and cost memory, a few volumes
+#: each: 0.46 GB peak for two threads one pair at a time at α = 45°, 0.97 GB four at a time.
+FLOW_BATCH_CPU = 1 << 22
 
 
 class ElevationFallbackWarning(UserWarning):
@@ -117,7 +131,9 @@ def object_geometries(
     """:func:`pair_geometry` of many objects; with ``flow="tvl1"`` every seed pair of every
     object (both directions) is one batched flow call, on the seeds' device, and with
     ``"guided"`` or ``"rows"`` one call per distinct angle between seeds (objects of other
-    seed shapes: one object at a time).
+    seed shapes: one object at a time). On the CPU the row matcher's calls take as many
+    pairs as :data:`FLOW_BATCH_CPU` allows. The records are those of :func:`pair_geometry`
+    bit for bit: the flows treat each pair of a batch on its own.
 
     Args:
         objects: per object its (V, C, H, W) seed views, the same shape for all.
@@ -131,23 +147,61 @@ def object_geometries(
         of the batched flow plus its own elevation fit), for :func:`synthesize_views`'s
         ``geometry``.
     """
+    return list(iter_object_geometries(objects, alpha, options, masks))
+
+
+def iter_object_geometries(
+    objects: Sequence[torch.Tensor],
+    alpha: float | Sequence[float],
+    options: SynthesisOptions | None = None,
+    masks: Sequence[torch.Tensor | None] | None = None,
+) -> Iterator[list[PairGeometry]]:
+    """:func:`object_geometries` one object at a time: the arguments are checked at the
+    call, the batched flows run when the first object's records are asked for, and each
+    object's elevation fit when its own records are (its warnings are raised then, so a
+    caller can tell whose they are)."""
     opts = options or SynthesisOptions()
     checked = [check_seeds(s, alpha)[0] for s in objects]
-    per_mask = list(masks) if masks is not None else [None] * len(checked)
+    per_mask: list[torch.Tensor | None] = list(masks) if masks is not None else [None] * len(checked)
     if len(per_mask) != len(checked):
         raise ValueError(f"masks must hold one entry per object ({len(checked)}), got {len(per_mask)}")
     shapes = {tuple(s.shape) for s in checked}
-    if opts.flow not in _BATCHED or len(checked) < 2 or (len(shapes) > 1 and opts.flow != "tvl1"):
-        return [pair_geometry(s, alpha, opts, m) for s, m in zip(checked, per_mask, strict=True)]
-    if len(shapes) > 1:
+    if opts.flow in _BATCHED and len(checked) >= 2 and len(shapes) > 1 and opts.flow == "tvl1":
         raise ValueError(f"objects must share one seed shape, got {sorted(shapes)}")
+    batched = opts.flow in _BATCHED and len(checked) >= 2 and len(shapes) == 1
+    return _object_records(checked, per_mask, alpha, opts, batched)
+
+
+def _object_records(
+    checked: list[torch.Tensor],
+    masks: list[torch.Tensor | None],
+    alpha: float | Sequence[float],
+    opts: SynthesisOptions,
+    batched: bool,
+) -> Iterator[list[PairGeometry]]:
+    """:func:`iter_object_geometries`'s records for checked arguments."""
+    if not batched:
+        for s, m in zip(checked, masks, strict=True):
+            yield pair_geometry(s, alpha, opts, m)
+        return
     steps = pair_angles(alpha, checked[0].shape[0])
     corrs, seconds = _batched_tvl1(checked, opts) if opts.flow == "tvl1" else _by_angle(checked, steps, opts)
     n = len(steps)
-    return [
-        _with_elevations(s, m, corrs[o * n : (o + 1) * n], seconds[o * n : (o + 1) * n], steps, opts)
-        for o, (s, m) in enumerate(zip(checked, per_mask, strict=True))
-    ]
+    for o, (s, m) in enumerate(zip(checked, masks, strict=True)):
+        yield _with_elevations(s, m, corrs[o * n : (o + 1) * n], seconds[o * n : (o + 1) * n], steps, opts)
+
+
+def _pairs_per_call(seeds: torch.Tensor, alpha: float, opts: SynthesisOptions) -> int | None:
+    """How many seed pairs of (V, C, H, W) ``seeds`` ``alpha`` apart one flow call takes: on
+    the CPU with the row matcher (``"rows"``, ``"guided"``) those whose cost volumes fit in
+    :data:`FLOW_BATCH_CPU` elements (at least one), else None (all at once)."""
+    if seeds.device.type != "cpu" or opts.flow not in ("rows", "guided"):
+        return None
+    h, w = seeds.shape[-2:]
+    f = prior_reduction(h, w) if opts.flow == "guided" else 1
+    depth = opts.flow_kwargs().get("depth")
+    volume = volume_size(h // f, w // f, alpha, None if depth is None else float(depth) / f)  # type: ignore[arg-type]
+    return max(1, FLOW_BATCH_CPU // (2 * volume))  # both directions
 
 
 def _by_angle(
@@ -155,25 +209,29 @@ def _by_angle(
 ) -> tuple[list[Correspondence], list[float]]:
     """Every consecutive seed pair of every object (V, C, H, W), in order, one flow call per
     distinct angle between the seeds (the row matcher and the guided flow search the
-    epipolar range of one α; the full circle has one α for all its pairs), and each pair's
-    share of its call's seconds."""
+    epipolar range of one α; the full circle has one α for all its pairs), split by
+    :func:`_pairs_per_call`, and each pair's share of its call's seconds."""
     n = len(steps)
     corrs: list[Correspondence | None] = [None] * (n * len(objects))
     seconds = [0.0] * len(corrs)
     for step in sorted(set(steps)):
         pairs = [i for i in range(n) if steps[i] == step]
-        t0 = time.perf_counter()
-        batch = estimate_correspondence(
-            torch.cat([s[pairs] for s in objects]),
-            torch.cat([s[[i + 1 for i in pairs]] for s in objects]),
-            method=opts.flow,
-            threshold=opts.threshold,
-            **opts.flow_kwargs(step),
-        )
-        share = (time.perf_counter() - t0) / len(batch)
+        firsts = torch.cat([s[pairs] for s in objects])
+        seconds_ = torch.cat([s[[i + 1 for i in pairs]] for s in objects])
+        per_call = _pairs_per_call(objects[0], step, opts) or len(firsts)
         at = [o * n + i for o in range(len(objects)) for i in pairs]
-        for j, corr in zip(at, batch, strict=True):
-            corrs[j], seconds[j] = corr, share
+        for lo in range(0, len(firsts), per_call):
+            t0 = time.perf_counter()
+            batch = estimate_correspondence(
+                firsts[lo : lo + per_call],
+                seconds_[lo : lo + per_call],
+                method=opts.flow,
+                threshold=opts.threshold,
+                **opts.flow_kwargs(step),
+            )
+            share = (time.perf_counter() - t0) / len(batch)
+            for j, corr in zip(at[lo : lo + per_call], batch, strict=True):
+                corrs[j], seconds[j] = corr, share
     filled = [c for c in corrs if c is not None]
     assert len(filled) == len(corrs), "each pair has one angle, so every slot is filled"
     return filled, seconds
