@@ -110,7 +110,8 @@ class CoilExperiment:
             about 0.13 s a view over two worker threads); not with ``seeds=2`` (Eq. 2 is singular).
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
             (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
-        workers: workers that synthesize the ``nvs`` galleries, one object each at a time,
+        workers: workers that synthesize the ``nvs`` galleries, a few objects each at a
+            time, their flows batched (:func:`~torch_eigview.scale.parallel.group_size`),
             and as threads measure the geometric poses (``three_view_pose``)
             (:func:`~torch_eigview.scale.parallel.map_ordered`; processes run one torch
             thread each, threads torch's current setting: the commands run them under

@@ -48,7 +48,7 @@ _BATCHED = ("tvl1", "rows", "guided")
 #: Cost-volume elements (both directions of every pair) one row-matcher call of
 #: :func:`object_geometries` takes on the CPU: 5 pairs of 128 × 128 views at α = 10°,
 #: 9 at 5°, one at 45°. A call costs the same Python and dispatch per tensor operation
-#: whatever the batch (about 14,000 operations for the guided flow of one pair), which
+#: whatever the batch (thousands of them for the guided flow of one pair), which
 #: worker threads pay in turn under the GIL: on two threads 20 objects' flows at α = 10
 #: took 1.0–1.3 s in batches of 4–10 pairs against 1.95–2.25 s one pair at a time (2.0–2.2 s
 #: on one thread either way). Larger batches gain little and cost memory, a few volumes
