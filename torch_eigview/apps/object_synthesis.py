@@ -78,15 +78,14 @@ def synthesize_group(
     per flow for a few objects costs a worker thread far less of Python's GIL than one per
     object. From an object whose seeds are refused on, each object is synthesized alone,
     so that the error is its own."""
-    _, alpha, thetas, _, options, _ = jobs[0]
+    _, alpha, thetas, step, options, overlap = jobs[0]
     try:
         records = _group_records([job[0] for job in jobs], alpha, thetas, options)
     except ValueError:
         records = None
     outcomes: list[tuple[SynthesizedViews, list[CaughtWarning]] | ValueError] = []
     for i, job in enumerate(jobs):
-        seeds, alpha, thetas, step, options, overlap = job
-        outcome = synthesize_object(seeds, alpha, thetas, step, options, overlap, records)
+        outcome = synthesize_object(job[0], alpha, thetas, step, options, overlap, records)
         if isinstance(outcome, ValueError) and records is not None:
             return outcomes + [synthesize_object(*j) for j in jobs[i:]]
         outcomes.append(outcome)

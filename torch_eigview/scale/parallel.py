@@ -165,11 +165,11 @@ def synthesize_objects(
     # A copy: sending a tensor moves its whole storage into shared memory, and the caller's
     # tensor (or the larger tensor it is a view of) with it.
     copy = workers and kind == "process"
-    seeds = (
+    sent = (
         _as_seeds(seeds) if not copy else _as_seeds(seeds).detach().to("cpu", copy=True)
         for seeds in itertools.chain([first], it)
     )
-    jobs = ((objs, alpha, angles, options) for objs in grouped(seeds, group))
+    jobs = ((objs, alpha, angles, options) for objs in grouped(sent, group))
     results = map_ordered(_synthesize_group, jobs, workers, finish=_own_group, kind=kind)
     with contextlib.closing(results):  # closing this generator ends the pool
         for outcomes in results:
