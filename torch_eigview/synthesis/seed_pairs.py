@@ -132,8 +132,9 @@ def object_geometries(
     object (both directions) is one batched flow call, on the seeds' device, and with
     ``"guided"`` or ``"rows"`` one call per distinct angle between seeds (objects of other
     seed shapes: one object at a time). On the CPU the row matcher's calls take as many
-    pairs as :data:`FLOW_BATCH_CPU` allows. The records are those of :func:`pair_geometry`
-    bit for bit: the flows treat each pair of a batch on its own.
+    pairs as :data:`FLOW_BATCH_CPU` allows. The flows treat each pair of a batch on its
+    own: the records are those of :func:`pair_geometry` (bit for bit with the guided flow
+    and the row matcher, ``tests/test_object_geometries.py``).
 
     Args:
         objects: per object its (V, C, H, W) seed views, the same shape for all.
