@@ -76,6 +76,19 @@ def test_bad_workers(workers: object, error: type[Exception], match: str) -> Non
         next(synthesize_objects(seeds_of(1), 5.0, THETAS, workers=workers))  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(
+    ("group", "error", "match"),
+    [
+        (0, ValueError, r"group=0 must be >= 1"),
+        (1.5, TypeError, "group must be an int"),
+        (True, TypeError, "group must be an int"),
+    ],
+)
+def test_bad_group(group: object, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        next(synthesize_objects(seeds_of(1), 5.0, THETAS, group=group))  # type: ignore[arg-type]
+
+
 def test_bad_object_type() -> None:
     with pytest.raises(TypeError, match=r"objects must yield \(V, C, H, W\) tensors, got list"):
         next(synthesize_objects([[1.0, 2.0]], 5.0, THETAS, workers=1))  # type: ignore[list-item]
