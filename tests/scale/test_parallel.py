@@ -11,7 +11,14 @@ import torch
 
 from torch_eigview.apps.bench_scaling import smooth_views
 from torch_eigview.scale.job_warnings import job_warnings
-from torch_eigview.scale.parallel import GROUP_OBJECTS, group_size, grouped, map_ordered, synthesize_objects
+from torch_eigview.scale.parallel import (
+    GROUP_OBJECTS,
+    each_or_alone,
+    group_size,
+    grouped,
+    map_ordered,
+    synthesize_objects,
+)
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
 
 THETAS = [-6.0, -2.0, 0.0, 2.5, 5.0, 9.0]
@@ -220,3 +227,18 @@ def test_a_group_gives_each_objects_views_or_its_error() -> None:
         for views in synthesize_objects([seeds[0], seeds[1], seeds[2][:1], seeds[3]], 5.0, THETAS):
             got.append(views)
     assert [torch.equal(g.views, a.views) for g, a in zip(got, alone, strict=False)] == [True, True]
+
+
+def test_each_or_alone_keeps_the_jobs_before_a_refusal() -> None:
+    """Jobs share what the group computed until one is refused; that one and the later ones
+    go alone, the earlier outcomes are kept (not computed again)."""
+    calls: list[tuple[int, object]] = []
+
+    def one(job: int, shared: object) -> int | ValueError:
+        calls.append((job, shared))
+        return ValueError(f"job {job}") if job == 2 and shared is not None else job
+
+    out = each_or_alone([0, 1, 2, 3], "batch", one)
+    assert out == [0, 1, 2, 3]
+    assert calls == [(0, "batch"), (1, "batch"), (2, "batch"), (2, None), (3, None)]
+    assert each_or_alone([5], None, lambda job, shared: ValueError("x"))[0].args == ("x",)

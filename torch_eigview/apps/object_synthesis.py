@@ -18,7 +18,7 @@ import torch
 
 from torch_eigview.apps.circle import synthesize_circle
 from torch_eigview.scale.job_warnings import job_warnings
-from torch_eigview.scale.parallel import grouped, map_ordered, own_views
+from torch_eigview.scale.parallel import each_or_alone, grouped, map_ordered, own_views
 from torch_eigview.synthesis import (
     ElevationFallbackWarning,
     PairGeometry,
@@ -83,13 +83,11 @@ def synthesize_group(
         records = _group_records([job[0] for job in jobs], alpha, thetas, options)
     except ValueError:
         records = None
-    outcomes: list[tuple[SynthesizedViews, list[CaughtWarning]] | ValueError] = []
-    for i, job in enumerate(jobs):
-        outcome = synthesize_object(job[0], alpha, thetas, step, options, overlap, records)
-        if isinstance(outcome, ValueError) and records is not None:
-            return outcomes + [synthesize_object(*j) for j in jobs[i:]]
-        outcomes.append(outcome)
-    return outcomes
+    return each_or_alone(
+        jobs,
+        records,
+        lambda job, shared: synthesize_object(job[0], alpha, thetas, step, options, overlap, shared),
+    )
 
 
 def _group_records(

@@ -34,6 +34,7 @@ from torch_eigview.check import as_angle_tensor, check_choice, check_int
 from torch_eigview.scale.job_warnings import routing
 from torch_eigview.scale.thread_policy import allowed_cpus
 from torch_eigview.synthesis import (
+    PairGeometry,
     SynthesisOptions,
     SynthesizedViews,
     check_seeds,
@@ -46,6 +47,7 @@ __all__ = [
     "KINDS",
     "PARALLEL_PIXELS",
     "available_cpus",
+    "each_or_alone",
     "group_size",
     "grouped",
     "map_ordered",
@@ -191,21 +193,31 @@ def _synthesize_group(
     before it are the caller's to yield first)."""
     try:
         records = iter_object_geometries(objects, alpha, options)
-        views: list[SynthesizedViews | Exception] = [
-            synthesize_views(s, alpha, angles, options, geometry=next(records)) for s in objects
-        ]
-    except Exception:  # an object the flows or the warp refuse: each alone, its error in its place
-        return [_synthesize_alone(s, alpha, angles, options) for s in objects]
-    return views
+    except Exception:  # an object the flows refuse: each alone, its error its own
+        records = None
+
+    def one(seeds: torch.Tensor, shared: Iterator[list[PairGeometry]] | None) -> SynthesizedViews | Exception:
+        try:
+            geometry = None if shared is None else next(shared)
+            return synthesize_views(seeds, alpha, angles, options, geometry=geometry)
+        except Exception as exc:  # raised in the caller's thread at this object's turn
+            return exc
+
+    return each_or_alone(objects, records, one)
 
 
-def _synthesize_alone(
-    seeds: torch.Tensor, alpha: float | Sequence[float], angles: list[float], options: SynthesisOptions | None
-) -> SynthesizedViews | Exception:
-    try:
-        return synthesize_views(seeds, alpha, angles, options)
-    except Exception as exc:  # raised in the caller's thread at this object's turn
-        return exc
+def each_or_alone(jobs: Sequence[T], shared: Any, one: Callable[[T, Any], R]) -> list[R]:
+    """``one(job, shared)`` for each of a group's jobs, ``shared`` what they share (a group's
+    batched flows), or None; from the first job whose outcome is an exception on, each
+    job alone (``one(job, None)``), so that an error is its own job's and not the
+    batch's. The outcomes in the jobs' order."""
+    out: list[R] = []
+    for i, job in enumerate(jobs):
+        outcome = one(job, shared)
+        if isinstance(outcome, Exception) and shared is not None:
+            return out + [one(j, None) for j in jobs[i:]]
+        out.append(outcome)
+    return out
 
 
 def _own_group(outcomes: list[SynthesizedViews | Exception]) -> list[SynthesizedViews | Exception]:

@@ -167,7 +167,7 @@ def iter_object_geometries(
     if len(per_mask) != len(checked):
         raise ValueError(f"masks must hold one entry per object ({len(checked)}), got {len(per_mask)}")
     shapes = {tuple(s.shape) for s in checked}
-    if opts.flow in _BATCHED and len(checked) >= 2 and len(shapes) > 1 and opts.flow == "tvl1":
+    if opts.flow == "tvl1" and len(shapes) > 1:
         raise ValueError(f"objects must share one seed shape, got {sorted(shapes)}")
     batched = opts.flow in _BATCHED and len(checked) >= 2 and len(shapes) == 1
     return _object_records(checked, per_mask, alpha, opts, batched)
@@ -218,14 +218,14 @@ def _by_angle(
     for step in sorted(set(steps)):
         pairs = [i for i in range(n) if steps[i] == step]
         firsts = torch.cat([s[pairs] for s in objects])
-        seconds_ = torch.cat([s[[i + 1 for i in pairs]] for s in objects])
+        nexts = torch.cat([s[[i + 1 for i in pairs]] for s in objects])
         per_call = _pairs_per_call(objects[0], step, opts) or len(firsts)
         at = [o * n + i for o in range(len(objects)) for i in pairs]
         for lo in range(0, len(firsts), per_call):
             t0 = time.perf_counter()
             batch = estimate_correspondence(
                 firsts[lo : lo + per_call],
-                seconds_[lo : lo + per_call],
+                nexts[lo : lo + per_call],
                 method=opts.flow,
                 threshold=opts.threshold,
                 **opts.flow_kwargs(step),
