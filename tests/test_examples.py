@@ -93,6 +93,17 @@ def test_bench_synthesis(coil_root: Path) -> None:
 
 
 @pytest.mark.coil
+def test_bench_synthesis_framed(coil_root: Path) -> None:
+    # A margin round the object: the row band gives the whole grid's views.
+    args = ["--root", str(coil_root), "--objects", "2", "--workers", "2", "--frame", "0.5"]
+    banded = load("bench_synthesis").main(args)
+    assert banded["same_views"] and banded["same_as_whole_grid"]
+    assert banded["frame"] == 0.5 and not banded["whole_grid"]
+    whole = load("bench_synthesis").main([*args, "--whole-grid"])
+    assert whole["same_views"] and whole["same_as_whole_grid"] and whole["whole_grid"]
+
+
+@pytest.mark.coil
 def test_pose_pair_choice(coil_root: Path) -> None:
     """The script's copy of the pair rule gives the library's poses (seed_pair_poses on the
     same views and appearance poses)."""

@@ -19,8 +19,9 @@ from kornia.geometry.transform import remap
 
 from torch_eigview.geometry.correspondence import correspondence_from_disparity
 from torch_eigview.geometry.row_maps import fill_row_holes, invert_row_map
-from torch_eigview.warp.maps import RowGeometry, WarpMaps, _refine_2d
+from torch_eigview.warp.maps import RowGeometry, WarpMaps
 from torch_eigview.warp.novel_view import NovelViewWarp
+from torch_eigview.warp.refine import refine_2d
 
 from tests.helpers import rand
 
@@ -242,8 +243,8 @@ def test_refine_2d_stops_at_a_fixed_point_with_the_same_result() -> None:
     valid = torch.ones(b, h, w, dtype=torch.bool)
     own = torch.zeros(1, t, 1, 1, dtype=torch.bool)
     start = torch.arange(w, dtype=torch.float32).expand(b, t, h, w) - 0.125
-    once = _refine_2d(start, disparity, coef, 4.0, valid, own, iters=1)
-    many = _refine_2d(start, disparity, coef, 4.0, valid, own, iters=50)
+    once = refine_2d(start, disparity, coef, 4.0, valid, own, iters=1)
+    many = refine_2d(start, disparity, coef, 4.0, valid, own, iters=50)
     for a, b_ in zip(once, many, strict=True):
         assert torch.equal(a, b_)
     assert bool(once[2][..., 1:-1, 1:-1].all())

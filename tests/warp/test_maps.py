@@ -7,8 +7,9 @@ import math
 import torch
 
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
-from torch_eigview.warp.maps import WarpMaps, _field_sampler
+from torch_eigview.warp.maps import WarpMaps
 from torch_eigview.warp.novel_view import NovelViewWarp
+from torch_eigview.warp.refine import field_sampler
 
 from tests.helpers import rand
 
@@ -170,7 +171,7 @@ def test_map_sampler_differentiates_through_its_fields() -> None:
     the case where only the fields do.
     """
     fields = torch.rand(1, 2, 8, 8, dtype=torch.float64, requires_grad=True)
-    sample = _field_sampler(fields, 2)
+    sample = field_sampler(fields, 2)
     x, y = torch.rand(1, 2, 8, 8, dtype=torch.float64) * 7, torch.rand(1, 2, 8, 8, dtype=torch.float64) * 7
     (sample(x, y).sum() + sample(x.flip(-1), y).sum()).backward()
     assert fields.grad is not None and bool(fields.grad.abs().sum() > 0)

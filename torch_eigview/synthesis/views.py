@@ -120,6 +120,7 @@ def synthesize_views(
     pair = _pair_index(theta, steps)
     out = seeds.new_empty((theta.numel(), *seeds.shape[1:]))
     seconds = {"correspondence": sum(g.seconds for g in geometry), "synthesis": 0.0}
+    grad = torch.is_grad_enabled() and seeds.requires_grad
     for n, geo in enumerate(geometry):
         t0 = time.perf_counter()
         sel = (pair == n).nonzero().flatten()
@@ -128,10 +129,15 @@ def synthesize_views(
         warp = NovelViewWarp(
             steps[n], opts.center, max_stretch=opts.max_stretch, elevation=geo.elevation, blend=opts.blend
         )
-        maps = warp.maps(geo.correspondence, theta[sel] - starts[n])
         pair_seeds = seeds[n : n + 2, None]  # (S=2, B=1, C, H, W)
         fg = foreground[n : n + 2, None]
         sil = fg if opts.silhouette else None
+        # The rows where a warped source is not zero (the foreground channel included): the
+        # maps are built for the target rows that can reach them, the other rows are 0 (the
+        # same values; not where the seeds take gradients, which those rows' zeros carry).
+        nonzero = fg if opts.silhouette else fg | (pair_seeds != 0).any(dim=2)
+        support = None if grad else nonzero.any(dim=-1).any(dim=0)
+        maps = warp.maps(geo.correspondence, theta[sel] - starts[n], support=support)
         if extent:
             # The foreground mask rides along as one more channel: one warp for both.
             channel = fg.to(seeds.dtype)[:, :, None]

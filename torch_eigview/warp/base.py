@@ -123,14 +123,22 @@ class ViewWarp(torch.nn.Module):
                 foreground share differently, so a pixel within float rounding of 1/2
                 can fall on different sides of it).
 
+        Maps that hold a band of rows (``maps.row0``, built with ``support``) fill that band;
+        the other rows of the result are 0, constants (no gradient flows from them to the
+        seeds' zero pixels, as it would through whole-grid maps).
+
         Returns:
             (B, T, C, H, W) synthesized views.
         """
-        s, b, _, h, w = maps.src_x.shape
+        s, b, _, rows, w = maps.src_x.shape
         sources = list(views.unbind(0)) if isinstance(views, torch.Tensor) else list(views)
         if len(sources) != s:
             raise ValueError(f"views must hold the maps' S = {s} seed views, got {len(sources)}")
-        c, dtype = sources[0].shape[1], sources[0].dtype
+        c, dtype, h = sources[0].shape[1], sources[0].dtype, sources[0].shape[-2]
+        if not 0 <= maps.row0 <= h - rows:
+            raise ValueError(
+                f"maps hold rows {maps.row0}..{maps.row0 + rows - 1}, which do not lie in the views' {h} rows"
+            )
         if masks is not None:
             if masks.shape != (s, b, h, w):
                 raise ValueError(
@@ -139,15 +147,17 @@ class ViewWarp(torch.nn.Module):
             m = (masks.to(sources[0].device) != 0).to(dtype)[:, :, None]
             # The mask rides along: one warp for both.
             sources = [torch.cat([v * m[i], m[i]], dim=1) for i, v in enumerate(sources)]
-        warped = _sample_views(sources, maps.src_x, maps.src_y)  # S of (B, T, C', H, W)
+        warped = _sample_views(sources, maps.src_x, maps.src_y, maps.row0)  # S of (B, T, C', R, W)
         # Weighted in place: the samples are this call's own temporaries.
         out = warped[0].mul_(maps.weight[0].to(dtype)[:, :, None])
         for i in range(1, s):
             out.add_(warped[i].mul_(maps.weight[i].to(dtype)[:, :, None]))
-        out = out.contiguous()
-        if masks is None:
+        out = out.contiguous() if masks is None else _renormalize(out[:, :, :c], out[:, :, c:])
+        if rows == h:
             return out
-        return _renormalize(out[:, :, :c], out[:, :, c:])
+        whole = out.new_zeros((*out.shape[:3], h, w))
+        whole[..., maps.row0 : maps.row0 + rows, :] = out
+        return whole
 
     def forward(
         self,
@@ -208,7 +218,7 @@ class ViewWarp(torch.nn.Module):
 
 
 def _sample_views(
-    views: list[torch.Tensor], src_x: torch.Tensor, src_y: torch.Tensor | None
+    views: list[torch.Tensor], src_x: torch.Tensor, src_y: torch.Tensor | None, row0: int = 0
 ) -> list[torch.Tensor]:
     """Bilinear samples of the seed views at the maps, all angles of a source in one call.
 
@@ -220,20 +230,25 @@ def _sample_views(
 
     Args:
         views: the S seed images, (B, C, H, W) each.
-        src_x: (S, B, T, H, W) source columns; ``src_y`` the same rows, or None (own row).
+        src_x: (S, B, T, R, W) source columns of target rows ``row0 … row0 + R − 1`` (R = H:
+            all); ``src_y`` the same rows, or None (own row).
 
     Returns:
-        S samples, (B, T, C, H, W) each.
+        S samples, (B, T, C, R, W) each.
     """
     b, _, h, w = views[0].shape
-    t = src_x.shape[2]
+    t, rows = src_x.shape[2], src_x.shape[3]
     dtype, device = views[0].dtype, views[0].device
     one = torch.ones((), dtype=dtype, device=device)
     # kornia's normalize_pixel_coordinates: the factor is a division in the views' dtype.
     fx = one if w == 1 else 2.0 / (one * w - 1.0)
     fy = one if h == 1 else 2.0 / (one * h - 1.0)
     ox, oy = (0.0 if w == 1 else 1.0), (0.0 if h == 1 else 1.0)
-    ys = torch.arange(h, dtype=dtype, device=device).view(h, 1) if src_y is None else src_y.to(dtype)
+    ys = (
+        torch.arange(row0, row0 + rows, dtype=dtype, device=device).view(rows, 1)
+        if src_y is None
+        else src_y.to(dtype)
+    )
     xs = src_x.to(dtype)
     if dtype in (torch.float32, torch.float64) and not (
         torch.is_grad_enabled() and (xs.requires_grad or ys.requires_grad)
@@ -250,9 +265,9 @@ def _sample_views(
         grid = torch.stack([xs * fx - ox, (ys * fy - oy).expand_as(xs)], dim=-1)
     return [
         F.grid_sample(
-            v, grid[i].view(b, t * h, w, 2), mode="bilinear", padding_mode="zeros", align_corners=True
+            v, grid[i].view(b, t * rows, w, 2), mode="bilinear", padding_mode="zeros", align_corners=True
         )
-        .view(b, v.shape[1], t, h, w)
+        .view(b, v.shape[1], t, rows, w)
         .transpose(1, 2)
         for i, v in enumerate(views)
     ]

@@ -16,14 +16,13 @@ seed images: :class:`~torch_eigview.warp.base.ViewWarp` samples the seeds with t
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import torch
-import torch.nn.functional as F
 
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.row_maps import invert_row_map, invert_row_segments
+from torch_eigview.warp.refine import refine_2d
 
 __all__ = ["RowGeometry", "WarpMaps"]
 
@@ -39,6 +38,9 @@ class WarpMaps:
         thetas: (T,) novel angles in degrees, or (B, T): each object's own angles.
         src_y: (S, B, T, H, W) source row, or None when every target pixel samples its
             own row (the camera axis is perpendicular to the rotation axis: a pure row warp).
+        row0: the first target row the maps hold: H here may be a band of the views' rows,
+            ``row0 … row0 + H − 1`` (maps built with ``support``, :meth:`RowGeometry.maps`);
+            every other row of the views samples only rows that are zero in the seeds.
     """
 
     src_x: torch.Tensor
@@ -46,6 +48,7 @@ class WarpMaps:
     hit: torch.Tensor
     thetas: torch.Tensor
     src_y: torch.Tensor | None = None
+    row0: int = 0
 
     @property
     def n_sources(self) -> int:
@@ -56,126 +59,6 @@ def _renormalize(weighted: torch.Tensor, share: torch.Tensor) -> torch.Tensor:
     """Silhouette-aware sampling's last step: ``weighted`` (foreground taps only) divided by
     the foreground ``share`` of the taps, 0 where that share is below 1/2 (background)."""
     return torch.where(share >= 0.5, weighted / share.clamp_min(0.5), 0.0)
-
-
-def _field_sampler(fields: torch.Tensor, t: int) -> Callable[..., torch.Tensor]:
-    """Bilinear sampler of per-object ``fields`` (B, F, H, W) at T·H·W points per object.
-
-    The fields do not depend on the target angle, so one input serves all T angles: the
-    points go into the grid as (B, T·H, W), one ``grid_sample`` call (border padding: these
-    are maps, not images; ``align_corners=True``, the convention kornia's ``remap`` uses for
-    pixel maps) instead of T stacked copies of the fields; the first ``n_fields`` fields
-    (default all).
-    """
-    b, f, h, w = fields.shape
-    sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
-    # Written in place when nothing is differentiated, one plane per coordinate: a
-    # permuted view is a grid grid_sample reads as fast, and each plane is written in one
-    # contiguous pass (an interleaved (…, 2) grid costs about three times as much to write).
-    planes = fields.new_empty(2, b, t, h, w)
-    firsts = [fields[:, :n].contiguous() for n in range(1, f)] + [fields]
-
-    def sample(x: torch.Tensor, y: torch.Tensor, n_fields: int = f) -> torch.Tensor:
-        if torch.is_grad_enabled() and (x.requires_grad or y.requires_grad or fields.requires_grad):
-            g = torch.stack([x * sx - 1, y * sy - 1], dim=-1)  # grid_sample keeps it for backward
-        else:
-            torch.mul(x, sx, out=planes[0]).sub_(1)
-            torch.mul(y, sy, out=planes[1]).sub_(1)
-            g = planes.permute(1, 2, 3, 4, 0)
-        g = g.reshape(b, t * h, w, 2)  # a view for both layouts
-        src = firsts[n_fields - 1]
-        out = F.grid_sample(src, g, mode="bilinear", padding_mode="border", align_corners=True)
-        return out.view(b, n_fields, t, h, w).transpose(1, 2)
-
-    return sample
-
-
-def _refine_2d(
-    src_x: torch.Tensor,
-    disparity: torch.Tensor,
-    coef: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor],
-    c: float,
-    valid: torch.Tensor,
-    own: torch.Tensor,
-    iters: int = 4,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Inverts the 2D forward map p -> p + (dx, dy)(p) by fixed-point iteration.
-
-    The displacement of source pixel p = (x, y) towards target angle t is linear in two
-    fields that do not depend on t, the centred column G = x - c and the disparity D:
-    ``dx = kx_g G + kx_d D`` and ``dy = ky_g G + ky_d D`` (``coef``). So only D is
-    sampled (G is exact: its bilinear interpolation with border padding is the clamped
-    column), once per object for all T angles.
-
-    Starts from the row-wise inverse ``src_x``; a target pixel is a hit when the iteration
-    lands on a valid source pixel that maps back to within half a pixel. The iteration
-    stops early, with the same result, once a step leaves every coordinate unchanged.
-
-    Args:
-        src_x: (B, T, H, W) row-wise inverse, the starting column.
-        disparity: (B, H, W) D on the source pixel grid.
-        coef: ``(kx_g, kx_d, ky_g, ky_d)``, each (1, T, 1, 1) or (B, T, 1, 1).
-        c: column of the rotation axis.
-        valid: (B, H, W) bool, source pixels with a trusted correspondence.
-        own: (1, T, 1, 1) or (B, T, 1, 1) bool, angles at which every source pixel counts
-            as valid (the seed's own angle).
-
-    Returns:
-        ``(src_x, src_y, hit)``, each (B, T, H, W).
-    """
-    _, t, h, w = src_x.shape
-    kx_g, kx_d, ky_g, ky_d = coef
-    dtype = disparity.dtype
-    xx = torch.arange(w, dtype=dtype, device=disparity.device)
-    yy = torch.arange(h, dtype=dtype, device=disparity.device).view(h, 1)
-    fields = torch.stack([disparity, valid.to(dtype)], dim=1)  # (B, 2, H, W)
-    sample = _field_sampler(fields, t)
-
-    # x - dx and y - dy with the constant parts folded per angle: a few passes per step.
-    x_at = (xx + kx_g * c, kx_g, kx_d)
-    y_at = (yy + ky_g * c, ky_g, ky_d)
-
-    # Without autograd the iteration writes into buffers it reuses (the same operations,
-    # so the same values): a fresh full-size output costs nearly as much again as the
-    # arithmetic (one product of 41 × 128 × 128 floats on one thread: 0.99 ms into a new
-    # tensor, 0.57 ms into a reused one). Two buffers per coordinate (a step reads one
-    # and writes the other), the clamped column and a temporary.
-    grad = torch.is_grad_enabled() and any(v.requires_grad for v in (src_x, disparity, *coef))
-    bufs = None if grad else [torch.empty_like(src_x) for _ in range(6)]
-
-    def step(base: tuple[torch.Tensor, ...], g: torch.Tensor, d: torch.Tensor, out: int = -1) -> torch.Tensor:
-        if bufs is None or out < 0:
-            return torch.addcmul(base[0] - base[1] * g, base[2], d, value=-1)
-        part = torch.sub(base[0], torch.mul(base[1], g, out=bufs[5]), out=bufs[5])
-        return torch.addcmul(part, base[2], d, value=-1, out=bufs[out])
-
-    sx, shift = src_x, ky_g * (xx - c)
-    if bufs is None:
-        sy = yy - (shift + ky_d * disparity[:, None])
-    else:  # the first step writes buffers 0 and 2
-        sy = torch.sub(yy, torch.mul(ky_d, disparity[:, None], out=bufs[3]).add_(shift), out=bufs[3])
-    for i in range(iters):
-        d = sample(sx, sy, 1)[:, :, 0]
-        g = sx.clamp(0, w - 1) if bufs is None else torch.clamp(sx, 0, w - 1, out=bufs[4])
-        nx, ny = step(x_at, g, d, i % 2), step(y_at, g, d, 2 + i % 2)
-        # A fixed point: every further step would give the same maps again.
-        done = torch.equal(nx, sx) and torch.equal(ny, sy)
-        sx, sy = nx, ny
-        if done:
-            break
-    s = sample(sx, sy)
-    d = s[:, :, 0]
-    # sx + dx - xx = sx - (x - dx) at the sampled disparity.
-    if bufs is None:
-        g = sx.clamp(0, w - 1)
-        residual = (sx - step(x_at, g, d)).abs() + (sy - step(y_at, g, d)).abs()
-    else:  # the halves go to the buffers that hold neither sx nor sy
-        g = torch.clamp(sx, 0, w - 1, out=bufs[4])
-        rx = step(x_at, g, d, 0 if bufs[0] is not sx else 1)
-        ry = step(y_at, g, d, 2 if bufs[2] is not sy else 3)
-        residual = torch.sub(sx, rx, out=rx).abs_().add_(torch.sub(sy, ry, out=ry).abs_())
-    inside = (g == sx) & (sy == sy.clamp(0, h - 1))  # NaN is outside: NaN != NaN
-    return sx, sy, ((s[:, :, 1] > 0.999) | own) & inside & (residual < 0.5)
 
 
 @dataclass(frozen=True)
@@ -209,29 +92,86 @@ class RowGeometry:
     tilt: float
 
     def source_maps(
-        self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, second: bool
+        self,
+        x1: torch.Tensor,
+        x2: torch.Tensor,
+        valid: torch.Tensor,
+        second: bool,
+        rows: tuple[int, int] | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
         """Maps for one seed view as the source; ``x1``, ``x2`` (B, H, W) are matching columns
-        in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``)."""
-        c, al, th = self.c, self.alpha, self.theta
-        src_x, hit = self._row_inverse(x1, x2, valid, second)
+        in view 1 and view 2, on the pixel grid of the source view (view 2 if ``second``).
+        ``rows``: (first, end) of the target rows to build, default all: the maps are then
+        (B, T, end − first, W), each row as in the whole-grid maps."""
+        r0, r1 = (0, x1.shape[-2]) if rows is None else rows
+        band = slice(r0, r1)
+        src_x, hit = self._row_inverse(x1[:, band], x2[:, band], valid[:, band], second)
         if self.tilt == 0.0:
             return src_x, None, hit
         own = (self.a if second else self.b) == 0
+        disparity = x1 - x2 if second else x2 - x1
+        return refine_2d(src_x, disparity, self._tilt_coefficients(second), self.c, valid, own, row0=r0)
+
+    def _tilt_coefficients(
+        self, second: bool
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(kx_g, kx_d, ky_g, ky_d)`` of :func:`~torch_eigview.warp.refine.refine_2d` for one seed view as the source."""
+        al, th = self.alpha, self.theta
         # The 2D displacement (dst_x - grid, dy) is linear in the grid's centred column G and
         # the disparity D towards the other view: x1 - c = G, x2 - c = G + D for view 1 as the
         # source, x2 - c = G, x1 - c = G + D for view 2.
         phi = al if second else 0.0
         dcos, dsin = torch.cos(th) - math.cos(phi), torch.sin(th) - math.sin(phi)
         z_d, x_d = (-math.cos(al), 1.0) if second else (1.0, 0.0)
-        coef = (
+        return (
             self.a + self.b - 1,
             self.a if second else self.b,
             -self.tilt * (dcos * (1 - math.cos(al)) / math.sin(al) - dsin),
             -self.tilt * (dcos * z_d / math.sin(al) - dsin * x_d),
         )
-        disparity = x1 - x2 if second else x2 - x1
-        return _refine_2d(src_x, disparity, coef, c, valid, own)
+
+    def row_band(self, correspondence: Correspondence, support: torch.Tensor) -> tuple[int, int]:
+        """The target rows that can sample a ``support`` row: (first, end).
+
+        A target pixel's source row lies within :meth:`_row_reach` rows of its own, so a
+        row farther than that (and a bilinear tap) from every support row samples none.
+
+        Args:
+            correspondence: (B, H, W) the correspondences the maps are built from.
+            support: (B, H) bool, the seed rows holding a pixel that is not zero (for
+                either seed view).
+
+        Returns:
+            ``(first, end)`` of the rows to build: all of them, ``(0, H)``, where the reach
+            is not finite; the first row alone where no row is support (the views are 0).
+        """
+        h = support.shape[-1]
+        found = support.any(dim=0).nonzero()
+        if found.numel() == 0:
+            return 0, min(h, 1)
+        reach = self._row_reach(correspondence)
+        if not math.isfinite(reach):
+            return 0, h
+        # One row for the bilinear tap below a fractional row, one for the rounding of the
+        # grid's normalization.
+        margin = math.ceil(reach) + 2
+        return max(0, int(found[0]) - margin), min(h, int(found[-1]) + margin + 1)
+
+    def _row_reach(self, correspondence: Correspondence) -> float:
+        """An upper bound on how many rows a target pixel's source row lies from its own:
+        0 for the pure row warp, else the largest ``|ky_g (g − c) + ky_d d|`` of
+        :func:`~torch_eigview.warp.refine.refine_2d`'s rows (g a column of the image, d a bilinear sample of the
+        disparity, so within its extremes) over both sources and every angle."""
+        if self.tilt == 0.0:
+            return 0.0
+        w = correspondence.shape[-1]
+        span = max(abs(self.c), abs(w - 1 - self.c))
+        reach = 0.0
+        for second, d in ((False, correspondence.disparity_12), (True, correspondence.disparity_21)):
+            _, _, ky_g, ky_d = self._tilt_coefficients(second)
+            largest = float(d.abs().amax()) if d.numel() else 0.0
+            reach = max(reach, float((ky_g.abs() * span + ky_d.abs() * largest).amax()))
+        return reach
 
     def _row_inverse(
         self, x1: torch.Tensor, x2: torch.Tensor, valid: torch.Tensor, second: bool
@@ -341,6 +281,7 @@ class RowGeometry:
         thetas: torch.Tensor,
         share_of_second: torch.Tensor,
         n_sources: int,
+        support: torch.Tensor | None = None,
     ) -> WarpMaps:
         """Both seed views' maps (or view 1's alone) and their blend weights.
 
@@ -350,19 +291,25 @@ class RowGeometry:
             share_of_second: (1, T, 1, 1) or (B, T, 1, 1) the second seed's weight where
                 both see a pixel.
             n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
+            support: optional (B, H) bool, the seed rows holding a pixel that is not zero
+                (either seed): the maps then hold the band of target rows that can sample
+                one (:meth:`row_band`; ``WarpMaps.row0`` its first row), each row as in
+                the whole-grid maps.
 
         Returns:
             :class:`WarpMaps` with S = ``n_sources``; ``src_y`` is None unless ``tilt`` is set.
         """
         d12 = correspondence.disparity_12
         cols = torch.arange(d12.shape[-1], dtype=d12.dtype, device=d12.device).expand_as(d12)
+        rows = None if support is None else self.row_band(correspondence, support)
+        row0 = 0 if rows is None else rows[0]
         # Source view 1: x1 is the pixel grid, x2 its match. Source view 2: the other way.
-        src1, srcy1, hit1 = self.source_maps(cols, cols + d12, correspondence.valid_12, second=False)
+        src1, srcy1, hit1 = self.source_maps(cols, cols + d12, correspondence.valid_12, False, rows)
         if n_sources == 1:
             sy = None if srcy1 is None else srcy1[None]
-            return WarpMaps(src1[None], torch.ones_like(src1)[None], hit1[None], thetas, sy)
+            return WarpMaps(src1[None], torch.ones_like(src1)[None], hit1[None], thetas, sy, row0)
         src2, srcy2, hit2 = self.source_maps(
-            cols + correspondence.disparity_21, cols, correspondence.valid_21, second=True
+            cols + correspondence.disparity_21, cols, correspondence.valid_21, True, rows
         )
         # Where both views see a pixel the nearer one in angle weighs more; where one is
         # occluded the other is used alone; where neither sees it, the angular weights.
@@ -372,4 +319,4 @@ class RowGeometry:
         torch.where(hit1 == hit2, (1 - share_of_second).expand_as(src1), hit1.to(d12.dtype), out=weight[0])
         torch.sub(1, weight[0], out=weight[1])
         src_y = None if srcy1 is None or srcy2 is None else torch.stack([srcy1, srcy2])
-        return WarpMaps(torch.stack([src1, src2]), weight, torch.stack([hit1, hit2]), thetas, src_y)
+        return WarpMaps(torch.stack([src1, src2]), weight, torch.stack([hit1, hit2]), thetas, src_y, row0)

@@ -109,7 +109,14 @@ class NovelViewWarp(ViewWarp):
             + ("" if self.camera is None else ", camera=affine")
         )
 
-    def maps(self, correspondence: Correspondence, thetas: object, n_sources: int = 2) -> WarpMaps:
+    def maps(
+        self,
+        correspondence: Correspondence,
+        thetas: object,
+        n_sources: int = 2,
+        *,
+        support: torch.Tensor | None = None,
+    ) -> WarpMaps:
         """Eq. 2's target→source maps and blend weights for the novel angles ``thetas``.
 
         Args:
@@ -121,6 +128,11 @@ class NovelViewWarp(ViewWarp):
                 map depends on its own object's angle only, so the (B, T) maps equal the
                 per-object calls stacked, built in one batched pass.
             n_sources: 2 to blend both seed views, 1 to warp view 1 alone.
+            support: optional (B, H) bool, the rows of the seed views that hold a pixel
+                other than zero (either seed, any channel). Given, the maps hold only the
+                target rows that can sample such a row (the object's rows and the few its
+                tilt reaches; ``WarpMaps.row0`` the first), each as in the whole-grid maps:
+                every other synthesized row is zero, and :meth:`apply_maps` writes it so.
 
         Returns:
             :class:`~torch_eigview.warp.maps.WarpMaps` with S = ``n_sources`` and ``thetas``
@@ -128,6 +140,16 @@ class NovelViewWarp(ViewWarp):
         """
         self._check_n_sources(n_sources)
         d12 = check_correspondence(correspondence).disparity_12
+        if support is not None:
+            if not isinstance(support, torch.Tensor) or support.dtype != torch.bool:
+                raise TypeError(
+                    f"support must be a bool tensor, got {getattr(support, 'dtype', type(support).__name__)}"
+                )
+            if support.shape != correspondence.shape[:2]:
+                raise ValueError(
+                    f"support must have shape (B, H) = {correspondence.shape[:2]}, got {tuple(support.shape)}"
+                )
+            support = support.to(d12.device)
         dtype, device = d12.dtype, d12.device
         b_objects, _, w = correspondence.shape
         theta = self._novel_angles(thetas, batch=b_objects)
@@ -142,7 +164,7 @@ class NovelViewWarp(ViewWarp):
         # x - c of view 1 as a (W,) row, broadcast by the arithmetic rather than expanded.
         sign = self._depth_sign(cols - c, cols + d12 - c, correspondence.valid_12)
         geo = RowGeometry(a, b, th, c, math.radians(self.alpha), sign, self.max_stretch, self._tilt)
-        return geo.maps(correspondence, theta, self._share_of_second(th), n_sources)
+        return geo.maps(correspondence, theta, self._share_of_second(th), n_sources, support)
 
     def _coefficients(self, theta: torch.Tensor, c: float) -> tuple[torch.Tensor, torch.Tensor, float]:
         """Eq. 2's (a, b), each of the shape of ``theta`` ((T,) or (B, T)), and the axis column."""

@@ -87,6 +87,11 @@ def _checked_maps(maps: object, imgs: torch.Tensor) -> tuple[torch.Tensor, torch
     s, b, _, h, w = src_x.shape
     if b != 1:
         raise ValueError(f"maps must describe one object (B = 1), got B={b}; split the batch per object")
+    if maps.row0 != 0 or h != imgs.shape[2]:
+        raise ValueError(
+            f"maps must cover every row of the images ({imgs.shape[2]}), got rows {maps.row0}..{maps.row0 + h - 1} "
+            "(maps built with support= hold a band of rows): build them without support"
+        )
     if (s, h, w) != (imgs.shape[0], imgs.shape[2], imgs.shape[3]):
         raise ValueError(
             f"images must have shape (S, C, H, W) = ({s}, C, {h}, {w}) to match maps.src_x "
