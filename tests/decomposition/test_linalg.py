@@ -79,3 +79,56 @@ def test_from_eigenpairs_fixes_signs_and_dtype() -> None:
         [0.800000011920929, 0.6000000238418579],
     ]
     assert fit.ratio.tolist() == [0.75, 0.25] and fit.n_components == 2 and fit.n_features == 2
+
+
+def _decaying(n: int, rank: int, seed: int = 0) -> torch.Tensor:
+    """A PSD (n, n) Gram of views whose spectrum decays, as image data's does."""
+    gen = torch.Generator().manual_seed(seed)
+    a = torch.randn(n, rank, generator=gen, dtype=torch.float64) * torch.logspace(
+        0, -3, rank, dtype=torch.float64
+    )
+    return a @ a.T
+
+
+def test_eigh_descending_leading_pairs_by_subspace_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
+    import torch_eigview.decomposition.eigh as eigh
+
+    def refuse(*_: object) -> None:
+        raise AssertionError("ARPACK ran: the subspace iteration did not converge")
+
+    monkeypatch.setattr(eigh, "_leading_by_arpack", refuse)
+    s = _decaying(600, 200)
+    w, v = eigh_descending(s, 15)
+    w_all, v_all = torch.linalg.eigh(s)
+    torch.testing.assert_close(w, w_all.flip(0)[:15], rtol=0, atol=1e-12 * float(w_all[-1]))
+    torch.testing.assert_close((v * v_all.flip(1)[:, :15]).sum(0).abs(), torch.ones(15, dtype=torch.float64))
+    torch.testing.assert_close(v.T @ v, torch.eye(15, dtype=torch.float64))
+    w2, v2 = eigh_descending(s, 15)
+    assert torch.equal(w, w2) and torch.equal(v, v2)  # a fixed start: the same pairs again
+
+
+@pytest.mark.parametrize("case", ["flat", "indefinite", "zero"])
+def test_eigh_descending_hands_over_to_arpack(monkeypatch: pytest.MonkeyPatch, case: str) -> None:
+    """White noise's flat spectrum does not converge within the budget, an indefinite
+    matrix's largest in magnitude are not its largest, a zero matrix has no direction:
+    ARPACK (or LAPACK's subset solver) gives the leading pairs."""
+    import torch_eigview.decomposition.eigh as eigh
+
+    gen = torch.Generator().manual_seed(1)
+    a = torch.randn(400, 400, generator=gen, dtype=torch.float64)
+    s = {"flat": a @ a.T, "indefinite": (a + a.T) / 2, "zero": torch.zeros(400, 400, dtype=torch.float64)}[
+        case
+    ]
+    calls: list[int] = []
+    arpack = eigh._leading_by_arpack
+
+    def spy(matrix: torch.Tensor, top: int) -> tuple[torch.Tensor, torch.Tensor]:
+        calls.append(top)
+        return arpack(matrix, top)
+
+    monkeypatch.setattr(eigh, "_leading_by_arpack", spy)
+    w, v = eigh_descending(s, 50)
+    assert calls == [50]
+    w_all = torch.linalg.eigvalsh(s).flip(0)[:50]
+    torch.testing.assert_close(w, w_all, rtol=0, atol=1e-9 * max(float(w_all.abs().max()), 1.0))
+    torch.testing.assert_close(v.T @ v, torch.eye(50, dtype=torch.float64))

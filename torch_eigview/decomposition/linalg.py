@@ -15,14 +15,14 @@ Convention: a data matrix ``X`` is (P, N), one row per view; ``Xc`` is X minus t
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-import numpy as np
 import torch
+
+from torch_eigview.decomposition.eigh import eigh_descending, single_threaded_blas
 
 __all__ = [
     "EigenFit",
@@ -111,71 +111,6 @@ def gram(xc: torch.Tensor, panels: int = 4) -> torch.Tensor:
         out[lo:hi, lo:] = block
         out[hi:, lo:hi] = block[:, hi - lo :].T
     return out
-
-
-_BLAS_CONTROLLER: list[object] = []  # a cached threadpoolctl.ThreadpoolController, when installed
-
-
-def single_threaded_blas() -> contextlib.AbstractContextManager[object]:
-    """SciPy's BLAS (OpenBLAS) limited to one thread, when threadpoolctl is installed.
-
-    Between torch's thread pool (busy right before and after, GEMMs) and OpenBLAS's own,
-    two pools contend for the cores: on 2 cores the COIL-20 fit spends ~40 ms more in the
-    eigh and the components product than with OpenBLAS on one thread (spinning workers).
-    """
-    if not _BLAS_CONTROLLER:
-        try:
-            from threadpoolctl import ThreadpoolController
-        except ImportError:  # pragma: no cover - a dependency; kept optional for vendored installs
-            _BLAS_CONTROLLER.append(None)
-        else:
-            _BLAS_CONTROLLER.append(ThreadpoolController())
-    controller = _BLAS_CONTROLLER[0]
-    if controller is None:
-        return contextlib.nullcontext()
-    limited: contextlib.AbstractContextManager[object] = controller.limit(  # type: ignore[attr-defined]
-        limits=1, user_api="blas"
-    )
-    return limited
-
-
-def eigh_descending(matrix: torch.Tensor, top: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Eigenpairs of a symmetric float64 (n, n) matrix by decreasing eigenvalue.
-
-    For a few leading pairs of a large matrix on the CPU: ARPACK's implicitly restarted
-    Lanczos (SciPy's ``eigsh``, ``tol=0``: converged to machine precision, a fixed
-    pseudo-random start, deterministic). On image data, whose spectrum decays, it needs a
-    few hundred products with the n×n matrix: 0.02 s against 0.07 s for LAPACK's
-    ``dsyevr`` on an index subset at n = 820, k = 15 (COIL-20), eigenpairs equal to 1e-15.
-    On a flat spectrum (white noise) it is up to 1.5x slower than ``dsyevr``, and where it
-    does not converge (or cannot start: a zero matrix) ``dsyevr`` (MRRR, backward
-    stable) takes over. The rank (eigenvalues above a tolerance) is exact from the leading
-    ``top``: when it is below ``top`` the remaining eigenvalues, smaller, are below it too.
-
-    Returns:
-        Eigenvalues (t,) descending and eigenvectors (n, t) as columns: t = ``top`` for a
-        large matrix, else all n (also when ``top`` is None).
-    """
-    n = matrix.shape[0]
-    if top is not None and matrix.device.type == "cpu" and n >= 256 and top <= n // 4:
-        from scipy.linalg import eigh  # scikit-image depends on SciPy
-        from scipy.sparse.linalg import ArpackNoConvergence, eigsh
-
-        a = matrix.numpy()
-        with single_threaded_blas() if n <= 2048 else contextlib.nullcontext():
-            # Not the ones vector: it spans the null space of a centred Gram matrix.
-            v0 = np.random.default_rng(0).standard_normal(n)
-            found = None
-            if a.any():  # ARPACK cannot start on a zero matrix (identical views)
-                try:
-                    found = eigsh(a, k=top, which="LA", tol=0, v0=v0, ncv=min(n, max(2 * top + 1, 48)))
-                except ArpackNoConvergence:
-                    pass
-            w, v = found or eigh(a, subset_by_index=[n - top, n - 1], driver="evr", check_finite=False)
-        order = np.argsort(w)[::-1].copy()
-        return torch.from_numpy(w[order]), torch.from_numpy(np.ascontiguousarray(v[:, order]))
-    w, v = torch.linalg.eigh(matrix)
-    return w.flip(0), v.flip(1)
 
 
 def peak_signs(vectors: torch.Tensor, dim: int) -> torch.Tensor:
