@@ -90,11 +90,11 @@ def _decaying(n: int, rank: int, seed: int = 0) -> torch.Tensor:
     return a @ a.T
 
 
-def test_eigh_descending_leading_pairs_by_subspace_iteration(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_eigh_descending_leading_pairs_by_lanczos(monkeypatch: pytest.MonkeyPatch) -> None:
     import torch_eigview.decomposition.eigh as eigh
 
     def refuse(*_: object) -> None:
-        raise AssertionError("ARPACK ran: the subspace iteration did not converge")
+        raise AssertionError("ARPACK ran: the Lanczos iteration did not converge")
 
     monkeypatch.setattr(eigh, "_leading_by_arpack", refuse)
     s = _decaying(600, 200)
@@ -107,18 +107,18 @@ def test_eigh_descending_leading_pairs_by_subspace_iteration(monkeypatch: pytest
     assert torch.equal(w, w2) and torch.equal(v, v2)  # a fixed start: the same pairs again
 
 
-@pytest.mark.parametrize("case", ["flat", "indefinite", "zero"])
+@pytest.mark.parametrize("case", ["flat", "low rank", "zero"])
 def test_eigh_descending_hands_over_to_arpack(monkeypatch: pytest.MonkeyPatch, case: str) -> None:
-    """White noise's flat spectrum does not converge within the budget, an indefinite
-    matrix's largest in magnitude are not its largest, a zero matrix has no direction:
-    ARPACK (or LAPACK's subset solver) gives the leading pairs."""
+    """White noise's flat spectrum does not converge within the budget (here 60 steps), a
+    matrix of rank below ``top`` leaves fewer Lanczos directions than pairs asked, a zero
+    matrix has none: ARPACK (or LAPACK's subset solver) gives the leading pairs."""
     import torch_eigview.decomposition.eigh as eigh
 
+    monkeypatch.setattr(eigh, "LANCZOS_STEPS", 60)
     gen = torch.Generator().manual_seed(1)
     a = torch.randn(400, 400, generator=gen, dtype=torch.float64)
-    s = {"flat": a @ a.T, "indefinite": (a + a.T) / 2, "zero": torch.zeros(400, 400, dtype=torch.float64)}[
-        case
-    ]
+    matrices = {"flat": a @ a.T, "low rank": a[:, :30] @ a[:, :30].T, "zero": torch.zeros(400, 400).double()}
+    s = matrices[case]
     calls: list[int] = []
     arpack = eigh._leading_by_arpack
 
@@ -132,3 +132,15 @@ def test_eigh_descending_hands_over_to_arpack(monkeypatch: pytest.MonkeyPatch, c
     w_all = torch.linalg.eigvalsh(s).flip(0)[:50]
     torch.testing.assert_close(w, w_all, rtol=0, atol=1e-9 * max(float(w_all.abs().max()), 1.0))
     torch.testing.assert_close(v.T @ v, torch.eye(50, dtype=torch.float64))
+
+
+def test_eigh_descending_indefinite_gives_the_largest() -> None:
+    """Lanczos finds both ends of a spectrum: the largest eigenvalues, not the largest in
+    magnitude, of a matrix with large negative ones."""
+    gen = torch.Generator().manual_seed(2)
+    q = torch.linalg.qr(torch.randn(300, 300, generator=gen, dtype=torch.float64)).Q
+    values = torch.cat([torch.logspace(2, -4, 150).double(), -torch.logspace(3, -4, 150).double()])
+    s = (q * values) @ q.T
+    w, v = eigh_descending((s + s.T) / 2, 10)
+    torch.testing.assert_close(w, values[:10], rtol=1e-10, atol=0)
+    torch.testing.assert_close(v.T @ v, torch.eye(10, dtype=torch.float64))
