@@ -36,12 +36,14 @@ def _digest(b: torch.Tensor) -> torch.Tensor:
     temporary on every pass raised glibc's mmap threshold, and the view blocks of a
     ``ViewCache`` then fragmented the heap: the COIL-100-sized build's peak grew 2.8x.)
     Both passes compute the same product on the same data, so their digests agree exactly
-    for an unchanged source.
+    for an unchanged source. The weights are the transpose of a (2, N) matrix: with an
+    (N, 2) one the CPU's GEMM took 4.4x as long (1.44 against 0.33 ms for a block of 41
+    views of 3 × 128 × 128, two threads): 0.7 s of the COIL-100-sized exact fit (605 blocks).
     """
     n = b.shape[1]
     ones = torch.ones(n, dtype=b.dtype, device=b.device)
-    weights = torch.stack([ones, torch.linspace(1.0, 2.0, n, dtype=b.dtype, device=b.device)], dim=1)
-    return (b @ weights).double()
+    weights = torch.stack([ones, torch.linspace(1.0, 2.0, n, dtype=b.dtype, device=b.device)])
+    return (b @ weights.T).double()
 
 
 class Stream:
