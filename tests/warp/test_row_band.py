@@ -157,3 +157,12 @@ def test_seeds_taking_gradients_get_whole_grid_maps(monkeypatch: pytest.MonkeyPa
     views = synthesize_views(seeds, 10.0, [2.0, 5.0], SynthesisOptions(flow="ilk")).views
     views.sum().backward()
     assert seen == [None] and seeds.grad is not None and seeds.grad[:, :, :5].abs().sum() > 0
+
+
+def test_a_non_finite_disparity_gives_every_row() -> None:
+    # No bound on the tilt's reach: the band is the whole grid, never a band that a NaN narrowed.
+    views = _object(slice(14, 22))
+    corr = _correspondence()
+    corr.disparity_12[0, 3, 5] = float("nan")
+    band = NovelViewWarp(10.0, elevation=8.0).maps(corr, THETAS, support=_support(views))
+    assert band.row0 == 0 and band.src_x.shape[-2] == H

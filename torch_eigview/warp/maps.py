@@ -170,7 +170,10 @@ class RowGeometry:
         for second, d in ((False, correspondence.disparity_12), (True, correspondence.disparity_21)):
             _, _, ky_g, ky_d = self._tilt_coefficients(second)
             largest = float(d.abs().amax()) if d.numel() else 0.0
-            reach = max(reach, float((ky_g.abs() * span + ky_d.abs() * largest).amax()))
+            here = float((ky_g.abs() * span + ky_d.abs() * largest).amax())
+            if not math.isfinite(here):  # a non-finite disparity: no bound (max() would drop a NaN)
+                return math.inf
+            reach = max(reach, here)
         return reach
 
     def _row_inverse(
