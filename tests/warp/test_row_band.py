@@ -166,3 +166,12 @@ def test_a_non_finite_disparity_gives_every_row() -> None:
     corr.disparity_12[0, 3, 5] = float("nan")
     band = NovelViewWarp(10.0, elevation=8.0).maps(corr, THETAS, support=_support(views))
     assert band.row0 == 0 and band.src_x.shape[-2] == H
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA not available")
+def test_no_band_off_the_cpu(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The band's bounds are host reads: on a GPU the maps cover every row.
+    seeds = _object(slice(10, 30), seed=3, channels=1)[:, 0].cuda()
+    seen = _spy_maps(monkeypatch, keep_support=True)
+    synthesize_views(seeds, 10.0, [2.0, 5.0], SynthesisOptions(flow="tvl1"))
+    assert seen == [None]

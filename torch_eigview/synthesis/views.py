@@ -134,9 +134,10 @@ def synthesize_views(
         sil = fg if opts.silhouette else None
         # The rows where a warped source is not zero (the foreground channel included): the
         # maps are built for the target rows that can reach them, the other rows are 0 (the
-        # same values; not where the seeds take gradients, which those rows' zeros carry).
+        # same values). Not where the seeds take gradients, which those rows' zeros carry,
+        # nor off the CPU, where the band's bounds would cost host round trips per pair.
         nonzero = fg if opts.silhouette else fg | (pair_seeds != 0).any(dim=2)
-        support = None if grad else nonzero.any(dim=-1).any(dim=0)
+        support = None if grad or seeds.device.type != "cpu" else nonzero.any(dim=-1).any(dim=0)
         maps = warp.maps(geo.correspondence, theta[sel] - starts[n], support=support)
         if extent:
             # The foreground mask rides along as one more channel: one warp for both.
