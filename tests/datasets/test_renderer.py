@@ -280,3 +280,32 @@ def test_demo_three_views_range_follows_the_seeds() -> None:
     # The seeds (-10, 0, 10) come out as rendered: each seed pair reproduces its own views.
     seeds = scene.views("egg", [-10.0, 0.0, 10.0])
     torch.testing.assert_close(views[[15, 25, 35]], seeds, rtol=0, atol=1e-5)
+
+
+@pytest.mark.parametrize("camera", [OrthographicCamera(24), PerspectiveCamera(24, distance=3.0)])
+def test_render_many_equals_render_at_each_angle(camera: object) -> None:
+    """The rays of all angles cast at once give every render bit for bit (NaN-free fields
+    compared as they are; the background's points are NaN in both)."""
+    from torch_eigview.datasets.renderer import render_many
+
+    thetas = [0.0, 12.5, -40.0, 181.0, 12.5]
+    for name in ("head", "cylinder"):
+        obj = make_object(name)
+        many = render_many(obj, thetas, camera)  # type: ignore[arg-type]
+        assert [r.theta for r in many] == thetas
+        for theta, r in zip(thetas, many, strict=True):
+            one = render(obj, theta, camera)  # type: ignore[arg-type]
+            assert torch.equal(r.image, one.image) and torch.equal(r.mask, one.mask)
+            assert torch.equal(r.depth, one.depth)
+            assert torch.equal(r.points.nan_to_num(-9.0), one.points.nan_to_num(-9.0))
+
+
+def test_render_many_checks_its_arguments() -> None:
+    from torch_eigview.datasets.renderer import render_many
+
+    obj, cam = make_object("egg"), OrthographicCamera(8)
+    with pytest.raises(ValueError, match=r"thetas must be finite angles in degrees, got \[0.0, nan\]"):
+        render_many(obj, [0.0, math.nan], cam)
+    with pytest.raises(TypeError, match=r"backdrop must be a Backdrop or None, got str"):
+        render_many(obj, [0.0], cam, backdrop="sky")  # type: ignore[arg-type]
+    assert render_many(obj, [], cam) == []

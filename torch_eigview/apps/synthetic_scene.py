@@ -26,11 +26,11 @@ from torch_eigview.datasets import (
     PerspectiveCamera,
     exact_correspondence,
     exact_correspondence_2d,
-    render,
     seen_error,
 )
 from torch_eigview.datasets.backdrop import Backdrop
 from torch_eigview.datasets.background import BackgroundModel
+from torch_eigview.datasets.renderer import Render, render_many
 from torch_eigview.datasets.shapes import SyntheticObject, make_object
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.synthesis import PairGeometry, SynthesisOptions, pair_geometry, pair_of, synthesize_views
@@ -102,9 +102,8 @@ class SyntheticScene:
             self._objects[name] = make_object(name, self.seed)
         return self._objects[name]
 
-    def _render(self, name: str, theta: float) -> tuple[torch.Tensor, torch.Tensor]:
-        """The (1, H, W) view and (H, W) foreground at ``theta``, background 0."""
-        r = render(self.object(name), theta, self.camera, backdrop=self.backdrop)
+    def _view(self, r: Render) -> tuple[torch.Tensor, torch.Tensor]:
+        """The (1, H, W) view and (H, W) foreground of a render, background 0."""
         if self.backdrop is None:
             return r.image, r.mask
         given = r.mask[None, None] if self.masks == "given" else None
@@ -112,13 +111,16 @@ class SyntheticScene:
         return view[0, :1], mask[0, 0]
 
     def _cached(self, name: str, thetas: Sequence[float]) -> list[tuple[torch.Tensor, torch.Tensor]]:
-        out = []
-        for t in thetas:
-            key = (name, round(float(t), 9))
-            if key not in self._cache:
-                self._cache[key] = self._render(name, float(t))
-            out.append(self._cache[key])
-        return out
+        keys = [(name, round(float(t), 9)) for t in thetas]
+        # The views not rendered yet, each once, in one call (the rays cast for all at once).
+        missing = {key: float(t) for key, t in zip(keys, thetas, strict=True) if key not in self._cache}
+        if missing:
+            renders = render_many(
+                self.object(name), list(missing.values()), self.camera, backdrop=self.backdrop
+            )
+            for key, r in zip(missing, renders, strict=True):
+                self._cache[key] = self._view(r)
+        return [self._cache[key] for key in keys]
 
     def views(self, name: str, thetas: Sequence[float]) -> torch.Tensor:
         """(T, 1, H, W) rendered views of object ``name`` at ``thetas`` (degrees)."""

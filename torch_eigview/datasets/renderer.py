@@ -9,6 +9,7 @@ are +inf on the background.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -24,6 +25,7 @@ __all__ = [
     "check_object",
     "pixel_grid",
     "render",
+    "render_many",
     "render_views",
     "rotation_to_camera",
     "surface_points",
@@ -51,16 +53,42 @@ def _cast(
         ``(t, hit)``, (N,) each: the ray parameter of the crossing (NaN where none) and
         whether the ray meets the object.
     """
-    th = math.radians(theta)
-    cos, sin = math.cos(th), math.sin(th)
-    f = obj.implicit
+    t, hit = _cast_many(obj, [theta], origin, direction, n_steps)
+    return t[0], hit[0]
 
-    def inside(o: torch.Tensor, d: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+
+#: Samples of the coarse march evaluated at once (angles × rays × steps): the angles of a
+#: :func:`_cast_many` call go through it in chunks of about this size.
+_MARCH_BATCH = 1 << 22
+
+
+def _cast_many(
+    obj: SyntheticObject,
+    thetas: list[float],
+    origin: torch.Tensor,
+    direction: torch.Tensor,
+    n_steps: int = 64,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_cast` for T angles at once, ``(t, hit)`` (T, N) each, every ray's value as
+    :func:`_cast` gives it alone (the same operations on it): the rays and their samples
+    do not depend on the angle (the bounding sphere is centred on the axis), so the coarse
+    march runs for several angles per call and the bisection for every angle's crossings
+    in one loop, a few dozen torch calls per batch instead of per view."""
+    f = obj.implicit
+    th = [math.radians(t) for t in thetas]
+    n = origin.shape[0]
+
+    def inside(
+        o: torch.Tensor, d: torch.Tensor, t: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor
+    ) -> torch.Tensor:
         o, d = o.to(t.dtype), d.to(t.dtype)
+        cos, sin = cos.to(t.dtype), sin.to(t.dtype)  # each a double rounded once, as a Python scalar is
         # Camera frame (xc, yc, zc) -> object frame: X = xc cos - zc sin, Z = xc sin + zc cos.
         xc, yc, zc = (o[:, i, None] + t * d[:, i, None] for i in range(3))
         return f(xc * cos - zc * sin, yc, xc * sin + zc * cos) < 0
 
+    cos_all = torch.tensor([math.cos(v) for v in th], dtype=GEOMETRY_DTYPE)
+    sin_all = torch.tensor([math.sin(v) for v in th], dtype=GEOMETRY_DTYPE)
     radius = obj.radius * 1.05
     # Only the rays that meet the bounding sphere |o + t d| <= radius, on their chord.
     tc = -(origin * direction).sum(-1)
@@ -72,22 +100,32 @@ def _cast(
     # Samples 2·radius/n_steps apart (0.03 units): thinner parts than that could be missed.
     ts = t0[:, None] + (2 * half)[:, None] * torch.linspace(0.0, 1.0, n_steps, dtype=GEOMETRY_DTYPE)
     # The coarse march needs only the sign of f: float32 is 5x faster here than float64.
-    ins = inside(o, d, ts.float())
-    first = ins.to(torch.int8).argmax(dim=1)
-    found = ins.any(dim=1) & (first > 0)
-    lo = ts.gather(1, (first - 1).clamp_min(0)[:, None])
-    hi = ts.gather(1, first[:, None])
-    keep = found.nonzero().squeeze(1)
-    lo, hi, o, d = lo[keep], hi[keep], o[keep], d[keep]
+    coarse = ts.float()
+    chunk = max(1, _MARCH_BATCH // max(1, ts.numel()))
+    firsts, founds = [], []
+    for lo_t in range(0, len(th), chunk):
+        sel = slice(lo_t, lo_t + chunk)
+        ins = inside(o, d, coarse, cos_all[sel, None, None], sin_all[sel, None, None])  # (T', R, S)
+        first = ins.to(torch.int8).argmax(dim=2)
+        firsts.append(first)
+        founds.append(ins.any(dim=2) & (first > 0))
+    first, found = torch.cat(firsts), torch.cat(founds)  # (T, R)
+    # Every angle's crossings, bracketed and bisected together: (angle, ray) pairs.
+    angle, ray = found.nonzero().unbind(1)
+    step = first[angle, ray]
+    lo = ts[ray, (step - 1).clamp_min(0)][:, None]
+    hi = ts[ray, step][:, None]
+    o, d = o[ray], d[ray]
+    cos, sin = cos_all[angle, None], sin_all[angle, None]
     for _ in range(36):  # the bracket shrinks from 0.03 units to below 1e-12
         mid = 0.5 * (lo + hi)
-        inner = inside(o, d, mid)
+        inner = inside(o, d, mid, cos, sin)
         hi = torch.where(inner, mid, hi)
         lo = torch.where(inner, lo, mid)
-    hit = torch.zeros(origin.shape[0], dtype=torch.bool)
-    hit[rays[keep]] = True
-    t = torch.full((origin.shape[0],), math.nan, dtype=GEOMETRY_DTYPE)
-    t[rays[keep]] = 0.5 * (lo + hi)[:, 0]
+    hit = torch.zeros(len(th), n, dtype=torch.bool)
+    hit[angle, rays[ray]] = True
+    t = torch.full((len(th), n), math.nan, dtype=GEOMETRY_DTYPE)
+    t[angle, rays[ray]] = 0.5 * (lo + hi)[:, 0]
     return t, hit
 
 
@@ -126,10 +164,23 @@ def surface_points(
     """Object-frame points (..., 3), depth (...,) and hit mask (...,) of pixels (x, y)."""
     origin, direction = camera.rays(x.reshape(-1), y.reshape(-1))
     t, hit = _cast(obj, theta, origin, direction)
+    return _surface(theta, camera, origin, direction, t, hit, x.shape)
+
+
+def _surface(
+    theta: float,
+    camera: Camera,
+    origin: torch.Tensor,
+    direction: torch.Tensor,
+    t: torch.Tensor,
+    hit: torch.Tensor,
+    shape: torch.Size,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """:func:`surface_points` from the rays' crossings ``t`` and ``hit`` (N,)."""
     pc = origin + t[:, None] * direction
     _, _, depth = camera.project(pc)
     points = pc @ rotation_to_camera(theta)  # P = R^T Pc
-    return points.view(*x.shape, 3), torch.where(hit, depth, math.inf).view(x.shape), hit.view(x.shape)
+    return points.view(*shape, 3), torch.where(hit, depth, math.inf).view(shape), hit.view(shape)
 
 
 def render(
@@ -159,24 +210,54 @@ def render(
     Raises:
         ValueError: ``theta`` is not finite, or a perspective camera is inside the object.
     """
-    obj = check_object(obj)
-    cam = check_camera(camera)
     theta = check_number(theta, "theta")
     if not math.isfinite(theta):
         raise ValueError(f"theta={theta} must be a finite angle in degrees")
-    cam.check_outside(obj.radius)
-    x, y = pixel_grid(cam)
-    points, depth, mask = surface_points(obj, theta, cam, x, y)
-    image = torch.zeros(cam.height, cam.width, dtype=GEOMETRY_DTYPE)
-    image[mask] = obj.intensity(points[mask]).clamp(0, 1)
-    if backdrop is None:
-        return Render(image[None].to(dtype), depth.to(dtype), mask, points.to(dtype), theta)
-    if not isinstance(backdrop, Backdrop):
+    return render_many(obj, [theta], camera, dtype=dtype, backdrop=backdrop)[0]
+
+
+def render_many(
+    obj: SyntheticObject,
+    thetas: Sequence[float],
+    camera: Camera,
+    *,
+    dtype: torch.dtype = torch.float32,
+    backdrop: Backdrop | None = None,
+) -> list[Render]:
+    """:func:`render` at each of ``thetas`` (degrees), the same renders, with the rays
+    cast for all angles at once (:func:`_cast_many`): a few dozen torch calls per batch of
+    views instead of per view.
+
+    Raises:
+        ValueError: an angle that is not finite, or a perspective camera inside the object.
+        TypeError: ``backdrop`` is neither None nor a Backdrop.
+    """
+    obj = check_object(obj)
+    cam = check_camera(camera)
+    angles = [check_number(t, "thetas") for t in thetas]
+    if not all(math.isfinite(t) for t in angles):
+        raise ValueError(f"thetas must be finite angles in degrees, got {angles}")
+    if backdrop is not None and not isinstance(backdrop, Backdrop):
         raise TypeError(f"backdrop must be a Backdrop or None, got {type(backdrop).__name__}")
-    rgb = image[None].repeat(3, 1, 1)
-    origin, direction = cam.rays(x[~mask], y[~mask])
-    rgb[:, ~mask] = backdrop.shade(origin, direction).T
-    return Render(rgb.to(dtype), depth.to(dtype), mask, points.to(dtype), theta)
+    cam.check_outside(obj.radius)
+    if not angles:
+        return []
+    x, y = pixel_grid(cam)
+    origin, direction = cam.rays(x.reshape(-1), y.reshape(-1))
+    ts, hits = _cast_many(obj, angles, origin, direction)
+    out = []
+    for theta, t, hit in zip(angles, ts, hits, strict=True):
+        points, depth, mask = _surface(theta, cam, origin, direction, t, hit, x.shape)
+        image = torch.zeros(cam.height, cam.width, dtype=GEOMETRY_DTYPE)
+        image[mask] = obj.intensity(points[mask]).clamp(0, 1)
+        if backdrop is None:
+            out.append(Render(image[None].to(dtype), depth.to(dtype), mask, points.to(dtype), theta))
+            continue
+        rgb = image[None].repeat(3, 1, 1)
+        bg_origin, bg_direction = cam.rays(x[~mask], y[~mask])
+        rgb[:, ~mask] = backdrop.shade(bg_origin, bg_direction).T
+        out.append(Render(rgb.to(dtype), depth.to(dtype), mask, points.to(dtype), theta))
+    return out
 
 
 def render_views(
@@ -192,4 +273,4 @@ def render_views(
     angles = [float(t) for t in torch.as_tensor(thetas, dtype=GEOMETRY_DTYPE).reshape(-1)]
     if not angles:
         raise ValueError("thetas must hold at least one angle, got none")
-    return torch.stack([render(obj, t, camera, dtype=dtype, backdrop=backdrop).image for t in angles])
+    return torch.stack([r.image for r in render_many(obj, angles, camera, dtype=dtype, backdrop=backdrop)])
