@@ -58,8 +58,8 @@ def _cast(
 
 
 #: Samples of the coarse march evaluated at once (angles × rays × steps): the angles of a
-#: :func:`_cast_many` call go through it in chunks of about this size.
-_MARCH_BATCH = 1 << 22
+#: :func:`_cast_many` call go through the march and the bisection in groups this large.
+_MARCH_BATCH = 1 << 20
 
 
 def _cast_many(
@@ -72,8 +72,9 @@ def _cast_many(
     """:func:`_cast` for T angles at once, ``(t, hit)`` (T, N) each, every ray's value as
     :func:`_cast` gives it alone (the same operations on it): the rays and their samples
     do not depend on the angle (the bounding sphere is centred on the axis), so the coarse
-    march runs for several angles per call and the bisection for every angle's crossings
-    in one loop, a few dozen torch calls per batch instead of per view."""
+    march and the bisection run for a group of angles per call (as many as keep the
+    group's samples within ``_MARCH_BATCH``), a few dozen torch calls per group instead
+    of per view."""
     f = obj.implicit
     th = [math.radians(t) for t in thetas]
     n = origin.shape[0]
@@ -101,31 +102,31 @@ def _cast_many(
     ts = t0[:, None] + (2 * half)[:, None] * torch.linspace(0.0, 1.0, n_steps, dtype=GEOMETRY_DTYPE)
     # The coarse march needs only the sign of f: float32 is 5x faster here than float64.
     coarse = ts.float()
+    t = torch.full((len(th), n), math.nan, dtype=GEOMETRY_DTYPE)
+    hit = torch.zeros(len(th), n, dtype=torch.bool)
+    # Angles in groups whose samples (and so their crossings) stay within the batch: the
+    # memory of a call does not grow with the number of angles.
     chunk = max(1, _MARCH_BATCH // max(1, ts.numel()))
-    firsts, founds = [], []
     for lo_t in range(0, len(th), chunk):
         sel = slice(lo_t, lo_t + chunk)
         ins = inside(o, d, coarse, cos_all[sel, None, None], sin_all[sel, None, None])  # (T', R, S)
         first = ins.to(torch.int8).argmax(dim=2)
-        firsts.append(first)
-        founds.append(ins.any(dim=2) & (first > 0))
-    first, found = torch.cat(firsts), torch.cat(founds)  # (T, R)
-    # Every angle's crossings, bracketed and bisected together: (angle, ray) pairs.
-    angle, ray = found.nonzero().unbind(1)
-    step = first[angle, ray]
-    lo = ts[ray, (step - 1).clamp_min(0)][:, None]
-    hi = ts[ray, step][:, None]
-    o, d = o[ray], d[ray]
-    cos, sin = cos_all[angle, None], sin_all[angle, None]
-    for _ in range(36):  # the bracket shrinks from 0.03 units to below 1e-12
-        mid = 0.5 * (lo + hi)
-        inner = inside(o, d, mid, cos, sin)
-        hi = torch.where(inner, mid, hi)
-        lo = torch.where(inner, lo, mid)
-    hit = torch.zeros(len(th), n, dtype=torch.bool)
-    hit[angle, rays[ray]] = True
-    t = torch.full((len(th), n), math.nan, dtype=GEOMETRY_DTYPE)
-    t[angle, rays[ray]] = 0.5 * (lo + hi)[:, 0]
+        found = ins.any(dim=2) & (first > 0)
+        del ins
+        # The group's crossings, bracketed and bisected together: (angle, ray) pairs.
+        angle, ray = found.nonzero().unbind(1)
+        step = first[angle, ray]
+        lo = ts[ray, (step - 1).clamp_min(0)][:, None]
+        hi = ts[ray, step][:, None]
+        o_r, d_r = o[ray], d[ray]
+        cos, sin = cos_all[sel][angle, None], sin_all[sel][angle, None]
+        for _ in range(36):  # the bracket shrinks from 0.03 units to below 1e-12
+            mid = 0.5 * (lo + hi)
+            inner = inside(o_r, d_r, mid, cos, sin)
+            hi = torch.where(inner, mid, hi)
+            lo = torch.where(inner, lo, mid)
+        hit[lo_t + angle, rays[ray]] = True
+        t[lo_t + angle, rays[ray]] = 0.5 * (lo + hi)[:, 0]
     return t, hit
 
 
