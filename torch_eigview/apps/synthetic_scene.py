@@ -113,7 +113,10 @@ class SyntheticScene:
     def _cached(self, name: str, thetas: Sequence[float]) -> list[tuple[torch.Tensor, torch.Tensor]]:
         keys = [(name, round(float(t), 9)) for t in thetas]
         # The views not rendered yet, each once, in one call (the rays cast for all at once).
-        missing = {key: float(t) for key, t in zip(keys, thetas, strict=True) if key not in self._cache}
+        missing: dict[tuple[str, float], float] = {}
+        for key, t in zip(keys, thetas, strict=True):
+            if key not in self._cache:
+                missing.setdefault(key, float(t))  # the first angle of a key, as rendered one by one
         if missing:
             renders = render_many(
                 self.object(name), list(missing.values()), self.camera, backdrop=self.backdrop
