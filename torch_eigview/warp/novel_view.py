@@ -133,6 +133,7 @@ class NovelViewWarp(ViewWarp):
                 target rows that can sample such a row (the object's rows and the few its
                 tilt reaches; ``WarpMaps.row0`` the first), each as in the whole-grid maps:
                 every other synthesized row is zero, and :meth:`apply_maps` writes it so.
+                The band's bounds are a few scalars read on the host (a sync on a GPU).
 
         Returns:
             :class:`~torch_eigview.warp.maps.WarpMaps` with S = ``n_sources`` and ``thetas``
