@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from kornia.geometry.transform import remap
 
 from torch_eigview.warp.normalize import (
     FILLED_FRAME,
@@ -116,6 +117,45 @@ def test_linear_in_image(dtype: torch.dtype) -> None:
     lhs = normalize_extent(a * x + b * y, masks)
     rhs = a * normalize_extent(x, masks) + b * normalize_extent(y, masks)
     torch.testing.assert_close(lhs, rhs, **TOL[dtype])
+
+
+def _remap_reference(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+    """normalize_extent written as kornia's remap of the whole (P, H, W) maps, the box rule
+    read from the masks with plain Python: the reference the fast path must equal."""
+    p, _, h, w = images.shape
+    dtype = images.dtype
+    map_x = torch.empty(p, h, w, dtype=dtype)
+    map_y = torch.empty(p, h, w, dtype=dtype)
+    for i in range(p):
+        y0, y1, x0, x1 = box(masks[i])
+        box_w = torch.tensor(max(x1 - x0, 1), dtype=dtype)
+        box_h = torch.tensor(max(y1 - y0, 1), dtype=dtype)
+        fills = [(n - 1) / b for n, b in ((w, box_w), (h, box_h)) if n > 1] or [torch.ones((), dtype=dtype)]
+        scale = fills[0] if len(fills) == 1 else torch.minimum(*fills)
+        cx, cy = torch.tensor(x0 + x1, dtype=dtype) / 2, torch.tensor(y0 + y1, dtype=dtype) / 2
+        u, v = torch.arange(w, dtype=dtype), torch.arange(h, dtype=dtype)
+        map_x[i] = (cx + (u - (w - 1) / 2) / scale).expand(h, w)
+        map_y[i] = (cy + (v - (h - 1) / 2) / scale)[:, None].expand(h, w)
+    return remap(images, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
+
+
+@DTYPES
+@pytest.mark.parametrize("shape", [(6, 1, 128, 128), (4, 3, 33, 49), (3, 2, 1, 17), (3, 1, 9, 1)])
+def test_equals_kornia_remap_bit_for_bit(dtype: torch.dtype, shape: tuple[int, int, int, int]) -> None:
+    # The maps are separable, so normalize_extent normalizes W + H coordinates and calls
+    # grid_sample itself; the samples must be remap's exactly, on a strided channel slice
+    # as synthesize_views passes it, singleton axes included.
+    p, c, h, w = shape
+    gen = torch.Generator().manual_seed(7)
+    images = rand(p, c + 1, h, w, seed=3, dtype=dtype)[:, :c]
+    masks = torch.zeros(p, h, w, dtype=torch.bool)
+    for i in range(p):
+        y0 = int(torch.randint(0, h, (1,), generator=gen))
+        x0 = int(torch.randint(0, w, (1,), generator=gen))
+        masks[i, y0 : y0 + max(1, h // 3), x0 : x0 + max(1, w // 2)] = True
+    out = normalize_extent(images, masks)
+    assert not torch.equal(out, images) or (h, w) == (1, 1)
+    assert torch.equal(out, _remap_reference(images, masks))
 
 
 def test_input_not_modified_and_batched_equals_single() -> None:

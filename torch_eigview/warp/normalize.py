@@ -10,6 +10,7 @@ Both operations are linear in the image for a fixed mask, as Eqs. 3–6 require.
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from kornia.geometry.transform import remap
 
 from torch_eigview.check import check_float_tensor, check_ndim
@@ -140,8 +141,9 @@ def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
 
     The scale is the same along x and y (the aspect ratio is kept) and chosen so that the
     box's longer side spans the image, with the box centred; bilinear sampling (kornia
-    ``remap``, ``align_corners=True``, zeros outside). An image with an empty mask is
-    returned unchanged.
+    ``remap``'s samples, ``align_corners=True``, zeros outside; the map is separable, so
+    float32 and float64 images take :func:`_sample_separable`, the same values bit for bit).
+    An image with an empty mask is returned unchanged.
 
     Args:
         images: (P, C, H, W) images.
@@ -169,6 +171,32 @@ def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
     cy = ((y0 + y1).to(dtype) / 2).view(p, 1, 1)
     u = torch.arange(w, dtype=dtype, device=images.device).view(1, 1, w)
     v = torch.arange(h, dtype=dtype, device=images.device).view(1, h, 1)
-    map_x = (cx + (u - (w - 1) / 2) / scale).expand(p, h, w)
-    map_y = (cy + (v - (h - 1) / 2) / scale).expand(p, h, w)
-    return remap(images, map_x, map_y, mode="bilinear", padding_mode="zeros", align_corners=True)
+    map_x = cx + (u - (w - 1) / 2) / scale  # (P, 1, W)
+    map_y = cy + (v - (h - 1) / 2) / scale  # (P, H, 1)
+    if dtype not in (torch.float32, torch.float64):
+        return remap(
+            images,
+            map_x.expand(p, h, w),
+            map_y.expand(p, h, w),
+            mode="bilinear",
+            padding_mode="zeros",
+            align_corners=True,
+        )
+    return _sample_separable(images, map_x, map_y)
+
+
+def _sample_separable(images: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor) -> torch.Tensor:
+    """kornia ``remap`` (bilinear, zeros, ``align_corners=True``) of (P, C, H, W) ``images``
+    at a separable map, columns ``map_x`` (P, 1, W) and rows ``map_y`` (P, H, 1): the same
+    samples bit for bit. The coordinates are normalized with kornia's formula (the factor
+    ``2 / (n − 1)`` rounded to the images' dtype, times the pixel, plus −1) on the W + H
+    values, not on every pixel, where ``remap`` spent half its time (13 of 26 ms for 41 views
+    of 128 × 128 on one thread); the grid is two planes read as (…, 2) pairs."""
+    p, _, h, w = images.shape
+    planes = images.new_empty(2, p, h, w)
+    for plane, coord, n in ((planes[0], map_x, w), (planes[1], map_y, h)):
+        factor, offset = (1.0, 0.0) if n == 1 else (2.0 / (n - 1.0), -1.0)
+        scaled = coord * torch.tensor(factor, dtype=images.dtype, device=images.device)
+        plane.copy_((scaled + torch.tensor(offset, dtype=images.dtype, device=images.device)).expand(p, h, w))
+    grid = planes.permute(1, 2, 3, 0)
+    return F.grid_sample(images, grid, mode="bilinear", padding_mode="zeros", align_corners=True)
