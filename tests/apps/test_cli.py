@@ -9,7 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+import skimage.io
 
 from torch_eigview.apps.cli import main
 from torch_eigview.apps.cli_args import progress_bar
@@ -118,6 +120,8 @@ def test_missing_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
         (["--elevation", "up"], "--elevation must be 'auto' or degrees"),
         (["--views", "4"], "invalid choice: 4"),
         (["--method", "knn"], "invalid choice: 'knn'"),
+        (["--pose-step", "0"], "--pose-step must be a number of degrees in (0, 360], got '0'"),
+        (["--pose-step", "ten"], "--pose-step must be a finite number, got 'ten'"),
     ],
     ids=[
         "components-0",
@@ -127,6 +131,8 @@ def test_missing_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
         "elevation",
         "views",
         "method",
+        "pose-step-0",
+        "pose-step-text",
     ],
 )
 def test_bad_arguments(
@@ -148,6 +154,43 @@ def test_missing_arguments(
     assert code == 2 and "--root" in err
     assert str(tmp_path / "coil-20-proc") in err and "TORCH_EIGVIEW_DATA" in err
     assert "Traceback" not in err
+
+
+def test_a_turntable_of_36_views_every_10_degrees(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--pose-step 10`` reads indices 0..35 as 0..350 degrees; the tests and the dense
+    gallery take every available view (10 degrees apart), and without the flag the
+    command warns and reads them 5 degrees apart (0..175: -20 is not a pose)."""
+    rng = np.random.default_rng(0)
+    for obj in (1, 2):
+        for p in range(36):
+            skimage.io.imsave(
+                tmp_path / f"obj{obj}__{p}.png",
+                rng.integers(0, 256, (12, 12), dtype=np.uint8),
+                check_contrast=False,
+            )
+    json_path = tmp_path / "out" / "r.json"
+    json_path.parent.mkdir()
+    args = [
+        "coil",
+        "--root",
+        str(tmp_path),
+        "--alpha",
+        "20",
+        "--synth",
+        "-20",
+        "40",
+        "1",
+        "--test",
+        "-40",
+        "40",
+    ]
+    args += ["--method", "dense", "--components", "3", "--quiet", "--json", str(json_path)]
+    assert main([*args, "--pose-step", "10"]) == 0
+    result = json.loads(json_path.read_text())
+    assert result["n_test"] == 2 * 9 and result["n_train_views"] == 2 * 7
+    code, err = _exit_status(args, capsys)
+    assert code == 2 and "pass pose_step=10 (eigview coil --pose-step 10)" in err
+    assert "no image at degrees=-20.0" in err and "[0, 5, 10, ..., 170, 175]" in err
 
 
 def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:

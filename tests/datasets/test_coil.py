@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,8 @@ import pytest
 import skimage.io
 import torch
 
-from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
+from torch_eigview.apps.circle import grid_step
+from torch_eigview.datasets.coil import CoilFolder, PoseStepWarning, parse_object_spec
 from torch_eigview.io import images
 
 COIL20 = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "coil-20-proc"
@@ -197,7 +199,9 @@ def test_pose_out_of_range_for_unit(tmp_path: Path) -> None:
     img = np.zeros((4, 4), dtype=np.uint8)
     _write(tmp_path, "obj1__0.png", img)
     _write(tmp_path, "obj1__72.png", img)
-    with pytest.raises(ValueError, match=r"pose_unit='index' needs P in 0\.\.71.*obj1__72\.png"):
+    with pytest.raises(
+        ValueError, match=r"pose_unit='index' with 5 degrees a pose needs P in 0\.\.71.*obj1__72\.png"
+    ):
         CoilFolder(tmp_path, pose_unit="index")
     _write(tmp_path, "obj1__360.png", img)
     with pytest.raises(ValueError, match=r"needs P in 0\.\.359.*obj1__360\.png"):
@@ -303,3 +307,70 @@ def test_parse_object_spec_rejects(spec: str) -> None:
 def test_parse_object_spec_type() -> None:
     with pytest.raises(TypeError, match="spec must be a string"):
         parse_object_spec(5)  # type: ignore[arg-type]
+
+
+# --- pose indices of another turntable step ---------------------------------------------
+
+
+def _index_folder(tmp_path: Path, n: int, objects: tuple[int, ...] = (1, 2)) -> Path:
+    img = np.zeros((4, 4), dtype=np.uint8)
+    for obj in objects:
+        for p in range(n):
+            _write(tmp_path, f"obj{obj}__{p}.png", img)
+    return tmp_path
+
+
+def test_a_whole_turntable_of_36_indices_warns_and_takes_its_step(tmp_path: Path) -> None:
+    root = _index_folder(tmp_path, 36)
+    with pytest.warns(PoseStepWarning, match=r"indices 0\.\.35.*0\.\.175 degrees.*pass pose_step=10 "):
+        folder = CoilFolder(root)
+    assert folder.poses(1) == [5.0 * i for i in range(36)]  # COIL-20's step, as before
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ten = CoilFolder(root, pose_step=10)
+        assert CoilFolder(root, pose_unit="index", pose_step=10).poses(2) == ten.poses(2)
+    assert ten.pose_step == 10.0 and ten.poses(1) == [10.0 * i for i in range(36)]
+    assert grid_step(ten.poses(1)) == 10.0 and "pose_step=10" in repr(ten)
+    assert ten.path(1, 350.0).name == "obj1__35.png" and ten.path(1, -10.0).name == "obj1__35.png"
+
+
+def test_no_warning_for_coil20_indices_or_other_sets(tmp_path: Path) -> None:
+    img = np.zeros((4, 4), dtype=np.uint8)
+    for name in "abcd":
+        (tmp_path / name).mkdir()
+    _index_folder(tmp_path / "a", 72)  # COIL-20
+    _index_folder(tmp_path / "b", 36, objects=(1,))
+    _index_folder(tmp_path / "b", 30, objects=(2,))  # not the same set for every object
+    for p in (0, 2):  # not 0..N-1
+        _write(tmp_path / "c", f"obj1__{p}.png", img)
+    _index_folder(tmp_path / "d", 2)  # two views: 180 degrees apart round a turntable
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert [CoilFolder(tmp_path / name).pose_step for name in "abcd"] == [5.0] * 4
+
+
+def test_pose_step_errors(tmp_path: Path) -> None:
+    root = _index_folder(tmp_path, 36)
+    for bad in (0, -5, 361, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match=r"pose_step must be a number of degrees in \(0, 360\]"):
+            CoilFolder(root, pose_step=bad)
+    with pytest.raises(TypeError, match="pose_step must be a number, got str"):
+        CoilFolder(root, pose_step="10")  # type: ignore[arg-type]
+    with pytest.raises(
+        ValueError, match=r"pose_step=10 is the step between pose indices.*pose_unit='degrees'"
+    ):
+        CoilFolder(root, pose_unit="degrees", pose_step=10)
+    with pytest.raises(ValueError, match=r"with 20 degrees a pose needs P in 0\.\.17.*obj1__18\.png"):
+        CoilFolder(root, pose_step=20)
+    (tmp_path / "deg").mkdir()
+    _rgb_folder(tmp_path / "deg")
+    with pytest.raises(
+        ValueError, match=r"pose_step=5 needs pose files named by index.*resolved to 'degrees'"
+    ):
+        CoilFolder(tmp_path / "deg", pose_step=5)
+
+
+def test_grid_step() -> None:
+    assert grid_step([5.0 * i for i in range(72)]) == 5.0
+    assert grid_step([350.0, 10.0, 30.0]) == 20.0  # round the circle: 350 -> 10
+    assert grid_step([90.0]) == 360.0

@@ -25,7 +25,7 @@ from torch_eigview.check import check_int, check_number
 from torch_eigview.geometry.angles import angle_range
 from torch_eigview.synthesis import PairGeometry, SynthesisOptions, SynthesizedViews, synthesize_views
 
-__all__ = ["CircleLayout", "check_overlap", "circle_layout", "synthesize_circle"]
+__all__ = ["CircleLayout", "check_overlap", "circle_layout", "grid_step", "synthesize_circle"]
 
 _TOL = 1e-6
 
@@ -57,6 +57,13 @@ def _pose_list(poses: Sequence[float]) -> str:
     if len(shown) > 10:
         shown = [*shown[:4], "...", *shown[-2:]]
     return f"[{', '.join(shown)}] ({len(poses)} poses)"
+
+
+def grid_step(poses: Sequence[float]) -> float:
+    """The poses' step: the smallest gap between consecutive ``poses`` round the circle, in
+    degrees (5 for COIL's 72 views, 10 for a turntable of 36; 360 for a single pose)."""
+    grid = sorted({float(p) % 360 for p in poses})
+    return min(b - a for a, b in zip(grid, [*grid[1:], grid[0] + 360], strict=True))
 
 
 def circle_layout(
@@ -106,7 +113,7 @@ def circle_layout(
         )
     real = seed_poses
     if method == "dense":
-        pose_step = min(b - a for a, b in zip(grid, [*grid[1:], grid[0] + 360], strict=True))
+        pose_step = grid_step(grid)
         # By default about 2M real views: the largest multiple of the poses' step up to 180/M.
         step = (
             max(1, math.floor(180.0 / m / pose_step + _TOL)) * pose_step

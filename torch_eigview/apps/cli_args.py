@@ -24,6 +24,7 @@ __all__ = [
     "gamma_arg",
     "objects_arg",
     "opset_arg",
+    "pose_step_arg",
     "progress_bar",
     "threads_arg",
     "word_or_float",
@@ -73,6 +74,14 @@ def finite_arg(flag: str) -> Callable[[str], float]:
         return value
 
     return parse
+
+
+def pose_step_arg(text: str) -> float:
+    """``--pose-step DEG``: degrees between pose indices, a number in (0, 360] (argparse type)."""
+    value = finite_arg("--pose-step")(text)
+    if not 0 < value <= 360:
+        raise argparse.ArgumentTypeError(f"--pose-step must be a number of degrees in (0, 360], got {text!r}")
+    return value
 
 
 def bounded_int_arg(flag: str, minimum: int, limit: tuple[str, int] | None = None) -> Callable[[str], int]:

@@ -18,6 +18,7 @@ from torch_eigview.apps.cli_args import (
     finite_arg,
     gamma_arg,
     objects_arg,
+    pose_step_arg,
     progress_bar,
     workers_arg,
 )
@@ -112,6 +113,14 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         choices=("auto", "index", "degrees"),
         default="auto",
         help="file pose P: an index (COIL-20, 5*P degrees), degrees (COIL-100), or auto (default)",
+    )
+    coil.add_argument(
+        "--pose-step",
+        type=pose_step_arg,
+        default=None,
+        metavar="DEG",
+        help="degrees between pose indices (default 5, COIL-20's): 10 for a turntable of 36 views named "
+        "obj1__0.png .. obj1__35.png",
     )
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
@@ -259,7 +268,12 @@ def run_coil(args: argparse.Namespace) -> int:
 
     outputs = [("--json", args.json), ("--save", args.save)]
     check_outputs(outputs, inputs=[("--root", args.root)])
-    folder = CoilFolder(find_coil_root(args.root), pose_unit=args.pose_unit, device=_device(args.device))
+    folder = CoilFolder(
+        find_coil_root(args.root),
+        pose_unit=args.pose_unit,
+        pose_step=args.pose_step,
+        device=_device(args.device),
+    )
     # An output inside the folder must not replace one of the images the run reads.
     check_outputs(
         outputs,

@@ -38,6 +38,7 @@ from torch_eigview.apps.circle import (
     CircleLayout,
     check_overlap,
     circle_layout,
+    grid_step,
 )
 from torch_eigview.apps.coil_result import CoilResult
 from torch_eigview.apps.object_synthesis import object_galleries
@@ -255,8 +256,8 @@ class CoilExperiment:
         if layout is not None:
             return folder.images(obj, layout.real), obj, layout.real
         angles = self.seed_poses()
-        if self.method == "dense":
-            angles = [self._center + a for a in self.synth_angles(5.0)]
+        if self.method == "dense":  # every real view in the synthesized range
+            angles = [self._center + a for a in self.synth_angles(grid_step(folder.poses(obj)))]
         return folder.images(obj, angles), obj, angles
 
     def _synthesis_job(
@@ -343,7 +344,8 @@ class CoilExperiment:
 
         t0 = time.perf_counter()
         if layout is None:
-            test_poses = [self._center + a for a in angle_range(self.test[0], self.test[1], 5.0, "test")]
+            step = grid_step([p for obj in objects for p in folder.poses(obj)])
+            test_poses = [self._center + a for a in angle_range(self.test[0], self.test[1], step, "test")]
         else:
             test_poses = layout.tests
         tests = self._tests(folder, objects, test_poses, x.dtype)

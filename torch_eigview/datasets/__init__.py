@@ -14,6 +14,7 @@ from torch_eigview.datasets.cameras import (
 from torch_eigview.datasets.coil import (
     DATA_ENV,
     CoilFolder,
+    PoseStepWarning,
     default_data_root,
     find_coil_root,
     parse_object_spec,
@@ -40,6 +41,7 @@ __all__ = [
     "CoilFolder",
     "OrthographicCamera",
     "PerspectiveCamera",
+    "PoseStepWarning",
     "Render",
     "SyntheticObject",
     "ViewCorrespondence",

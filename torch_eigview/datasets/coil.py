@@ -1,7 +1,8 @@
 """Loading COIL-style turntable images (``obj{O}__{P}.png``) as tensors.
 
 COIL-20 ("processed") names pose ``P`` by its index (the view at ``5·P`` degrees); COIL-100
-uses the same layout with ``P`` in degrees. :class:`CoilFolder` scans a folder once, reads
+uses the same layout with ``P`` in degrees. A turntable of other views named by index
+(``obj1__0.png`` … ``obj1__35.png`` every 10°) gives its step as ``pose_step``. :class:`CoilFolder` scans a folder once, reads
 files lazily with :func:`~torch_eigview.io.images.read_image` and caches the decoded pixels.
 """
 
@@ -12,6 +13,7 @@ import numbers
 import operator
 import os
 import re
+import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -21,7 +23,14 @@ import torch
 from torch_eigview.check import as_angle_tensor, check_choice, check_limit, check_number
 from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
 
-__all__ = ["DATA_ENV", "CoilFolder", "default_data_root", "find_coil_root", "parse_object_spec"]
+__all__ = [
+    "DATA_ENV",
+    "CoilFolder",
+    "PoseStepWarning",
+    "default_data_root",
+    "find_coil_root",
+    "parse_object_spec",
+]
 
 #: The environment variable naming the folder that holds the data sets (``coil-20-proc/``, …).
 DATA_ENV = "TORCH_EIGVIEW_DATA"
@@ -31,6 +40,7 @@ _FILE_RE = re.compile(r"obj([0-9]+)__([0-9]+)\.png", re.ASCII)
 _SPEC_RE = re.compile(r"\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?", re.ASCII)
 _POSE_UNITS = ("auto", "index", "degrees")
 _N_INDEX_POSES = 72  # COIL-20: pose indices 0..71, 5 degrees apart
+_INDEX_STEP = 5.0  # COIL-20: degrees between consecutive pose indices
 _ANGLE_TOL = 1e-6  # degrees
 # A source checkout keeps its data beside it, in ../shared/data (this file is
 # <checkout>/torch_eigview/datasets/coil.py); an installed copy has no such folder.
@@ -170,6 +180,49 @@ def _pose_unit(found: list[tuple[int, int, Path]]) -> str:
     )
 
 
+class PoseStepWarning(UserWarning):
+    """Pose indices read with COIL-20's 5° step that look like a whole turntable at another
+    step: every object has the views ``0 … N − 1``, 3 <= N < 72 (see ``CoilFolder(pose_step=)``)."""
+
+
+def _check_step(pose_step: float | None, pose_unit: str) -> float | None:
+    """``pose_step`` checked: None, or a finite number of degrees in (0, 360] for index poses."""
+    if pose_step is None:
+        return None
+    step = check_number(pose_step, "pose_step")
+    if not (math.isfinite(step) and 0 < step <= 360):
+        raise ValueError(f"pose_step must be a number of degrees in (0, 360], got {pose_step!r}")
+    if pose_unit == "degrees":
+        raise ValueError(
+            f"pose_step={pose_step!r} is the step between pose indices, so it needs pose_unit='index' "
+            "or 'auto', got pose_unit='degrees' (its file poses are degrees already)"
+        )
+    return float(step)
+
+
+def _warn_whole_circle(root: Path, files: dict[int, dict[float, Path]]) -> None:
+    """A :class:`PoseStepWarning` where every object holds the indices 0 … N − 1, 3 <= N < 72
+    (fewer than three views round a turntable are 180° apart or a single view):
+    read 5° apart they cover 0 … 5·(N − 1)°, the first part of COIL-20's circle, while N
+    views of a turntable named by index are 360 / N degrees apart; nothing in the files
+    tells the two apart."""
+    counts = {len(views) for views in files.values()}
+    if len(counts) != 1:
+        return
+    n = counts.pop()
+    expected = {_INDEX_STEP * i for i in range(n)}
+    if not 3 <= n < _N_INDEX_POSES or any(set(views) != expected for views in files.values()):
+        return
+    warnings.warn(
+        f"{root}: every object has the pose indices 0..{n - 1}, read with COIL-20's step of "
+        f"{_INDEX_STEP:g} degrees as 0..{_INDEX_STEP * (n - 1):g} degrees; if the {n} views go once round "
+        f"the turntable they are {360 / n:g} degrees apart: pass pose_step={360 / n:g} "
+        f"(eigview coil --pose-step {360 / n:g})",
+        PoseStepWarning,
+        stacklevel=3,
+    )
+
+
 class CoilFolder:
     """A folder of COIL-style images ``obj{O}__{P}.png``, read lazily and cached.
 
@@ -185,6 +238,10 @@ class CoilFolder:
             object has some ``P`` above 71, the largest COIL-20 index, ``"index"`` when none
             has, and an error when the objects disagree (a stray file). A COIL-100 subset
             whose poses all lie below 72 degrees is thus read as indices; pass the unit then.
+        pose_step: degrees between consecutive pose indices (``pose_unit`` "index", or
+            "auto" resolving to it): default 5, COIL-20's. A folder whose objects all hold
+            the indices ``0 … N − 1`` for some 3 <= N < 72 warns (:class:`PoseStepWarning`) when
+            the step is not given: N views once round a turntable are ``360 / N`` apart.
         dtype: Floating dtype of the returned tensors.
         device: Device of the returned tensors (files are read and decoded on the CPU).
 
@@ -193,8 +250,9 @@ class CoilFolder:
             floating dtype.
         ValueError: ``root`` is not a folder or holds no COIL file, a COIL-named entry is
             not a regular file (FIFO, device, folder, symlink loop), ``pose_unit`` is
-            unknown or "auto" finds mixed conventions, a pose lies outside ``[0, 360)``
-            degrees, two files name the same view, or the first image cannot be read.
+            unknown or "auto" finds mixed conventions, ``pose_step`` is not in (0, 360] or
+            comes with ``pose_unit="degrees"``, a pose lies outside ``[0, 360)`` degrees,
+            two files name the same view, or the first image cannot be read.
     """
 
     def __init__(
@@ -202,6 +260,7 @@ class CoilFolder:
         root: str | os.PathLike[str],
         *,
         pose_unit: str = "auto",
+        pose_step: float | None = None,
         dtype: torch.dtype = torch.float32,
         device: torch.device | str = "cpu",
     ) -> None:
@@ -210,6 +269,7 @@ class CoilFolder:
         if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
             raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
         pose_unit = check_choice(pose_unit, "pose_unit", _POSE_UNITS)
+        given_step = _check_step(pose_step, pose_unit)
         self.root = Path(root)
         if not self.root.is_dir():
             raise ValueError(f"root={str(self.root)!r} must be an existing directory")
@@ -220,17 +280,28 @@ class CoilFolder:
         pose_unit = self.pose_unit
         self.dtype = dtype
         self.device = torch.device(device)
-        step, limit = (5.0, _N_INDEX_POSES) if pose_unit == "index" else (1.0, 360)
+        if pose_unit == "degrees" and given_step is not None:
+            raise ValueError(
+                f"pose_step={pose_step!r} needs pose files named by index, but the folder's poses "
+                "are degrees (some P >= 72; pose_unit 'auto' resolved to 'degrees')"
+            )
+        #: Degrees between consecutive file poses P.
+        self.pose_step = (_INDEX_STEP if given_step is None else given_step) if pose_unit == "index" else 1.0
+        step = self.pose_step
+        limit = math.ceil(360 / step - _ANGLE_TOL) if pose_unit == "index" else 360
         self._files: dict[int, dict[float, Path]] = {}
         for obj, p, path in sorted(found):
             if p >= limit:
                 raise ValueError(
-                    f"pose_unit={pose_unit!r} needs P in 0..{limit - 1} (angles in [0, 360)), got {path}"
+                    f"pose_unit={pose_unit!r} with {step:g} degrees a pose needs P in 0..{limit - 1} "
+                    f"(angles in [0, 360)), got {path}"
                 )
             views = self._files.setdefault(obj, {})
             if step * p in views:
                 raise ValueError(f"{path} and {views[step * p]} name the same view (object {obj})")
             views[step * p] = path
+        if pose_unit == "index" and given_step is None:
+            _warn_whole_circle(self.root, self._files)
         first_path = min(found)[2]
         first = read_image(first_path)
         c, h, w = first.shape
@@ -248,7 +319,7 @@ class CoilFolder:
     def __repr__(self) -> str:
         return (
             f"CoilFolder(root={str(self.root)!r}, objects={len(self._files)}, files={len(self)}, "
-            f"pose_unit={self.pose_unit!r}, image_shape={self.image_shape})"
+            f"pose_unit={self.pose_unit!r}, pose_step={self.pose_step:g}, image_shape={self.image_shape})"
         )
 
     def poses(self, obj: int) -> list[float]:
