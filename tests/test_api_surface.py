@@ -124,6 +124,7 @@ SUBPACKAGES = {
         "DATA_ENV",
         "OrthographicCamera",
         "PerspectiveCamera",
+        "PoseStepWarning",
         "Render",
         "SHAPES",
         "SyntheticObject",
