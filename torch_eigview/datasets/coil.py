@@ -2,8 +2,9 @@
 
 COIL-20 ("processed") names pose ``P`` by its index (the view at ``5·P`` degrees); COIL-100
 uses the same layout with ``P`` in degrees. A turntable of other views named by index
-(``obj1__0.png`` … ``obj1__35.png`` every 10°) gives its step as ``pose_step``. :class:`CoilFolder` scans a folder once, reads
-files lazily with :func:`~torch_eigview.io.images.read_image` and caches the decoded pixels.
+(``obj1__0.png`` … ``obj1__35.png`` every 10°) gives its step as ``pose_step``.
+:class:`CoilFolder` scans a folder once, reads files lazily with
+:func:`~torch_eigview.io.images.read_image` and caches the decoded pixels.
 """
 
 from __future__ import annotations
