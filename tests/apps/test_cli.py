@@ -193,6 +193,26 @@ def test_a_turntable_of_36_views_every_10_degrees(tmp_path: Path, capsys: pytest
     assert "no image at degrees=-20.0" in err and "[0, 5, 10, ..., 170, 175]" in err
 
 
+def test_a_gray_backdrop_set_to_zero(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--background R,G,B`` keys a backdrop out of every view the run reads (seeds, tests,
+    real galleries); ``--tolerance`` without it, or a colour that is not one, is an error."""
+    for obj in (1, 2):
+        for p in range(72):
+            img = np.full((12, 12), 110, dtype=np.uint8)
+            img[3:9, 2 + obj + p % 3 : 7 + obj + p % 3] = 60 * obj
+            skimage.io.imsave(tmp_path / f"obj{obj}__{p}.png", img, check_contrast=False)
+    json_path = tmp_path / "out" / "r.json"
+    json_path.parent.mkdir()
+    args = ["coil", "--root", str(tmp_path), "--alpha", "10", "--test", "-10", "10", "--method", "dense"]
+    args += ["--components", "3", "--quiet", "--json", str(json_path)]
+    assert main([*args, "--background", "110", "--tolerance", "8"]) == 0
+    assert json.loads(json_path.read_text())["n_test"] == 2 * 5
+    code, err = _exit_status([*args, "--tolerance", "8"], capsys)
+    assert code == 2 and "--tolerance goes with --background auto or R,G,B, not with keep" in err
+    code, err = _exit_status([*args, "--background", "gray"], capsys)
+    assert code == 2 and "--background 'gray' must be keep, auto, or a colour R,G,B" in err
+
+
 def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--root`` defaults to ``$TORCH_EIGVIEW_DATA/coil-20-proc``; the flag wins over it."""
     from torch_eigview.apps import experiment

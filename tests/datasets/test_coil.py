@@ -12,6 +12,7 @@ import skimage.io
 import torch
 
 from torch_eigview.apps.circle import grid_step
+from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.coil import CoilFolder, PoseStepWarning, parse_object_spec
 from torch_eigview.io import images
 
@@ -374,3 +375,49 @@ def test_grid_step() -> None:
     assert grid_step([5.0 * i for i in range(72)]) == 5.0
     assert grid_step([350.0, 10.0, 30.0]) == 20.0  # round the circle: 350 -> 10
     assert grid_step([90.0]) == 360.0
+
+
+# --- a backdrop that is not black -------------------------------------------------------
+
+
+def _backdrop_folder(tmp_path: Path) -> np.ndarray:
+    """Two objects x 4 views: a gray backdrop (110) with a bright square (200) and a darker
+    patch inside it (40) at a place that moves with the pose."""
+    for obj in (1, 2):
+        for p in range(4):
+            img = np.full((16, 16), 110, dtype=np.uint8)
+            img[4:12, 3 + p : 9 + p] = 200
+            img[6:8, 4 + p : 6 + p] = 40
+            _write(tmp_path, f"obj{obj}__{p}.png", img)
+    return img
+
+
+@pytest.mark.filterwarnings("ignore::torch_eigview.datasets.coil.PoseStepWarning")  # 4 views named 0..3
+def test_background_model_sets_the_backdrop_to_zero(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    last = _backdrop_folder(tmp_path)
+    model = BackgroundModel(background=(110 / 255,), tolerance=8 / 255)
+    folder = CoilFolder(tmp_path, background=model)
+    calls = []
+    masks = BackgroundModel.masks
+    monkeypatch.setattr(
+        BackgroundModel, "masks", lambda self, x, m=None: calls.append(1) or masks(self, x, m)
+    )
+    view = folder.image(2, 15.0)
+    expected = np.where(last == 110, 0, last).astype(np.float32) / 255
+    np.testing.assert_array_equal(view[0].numpy(), expected)  # the object's pixels as read, the backdrop 0
+    assert torch.equal(folder.images(2, [15.0, 15.0])[1], view) and len(calls) == 1  # one estimate a file
+    assert torch.equal(folder.load_all([2])[0][3], view)
+    assert "background=BackgroundModel(" in repr(folder)
+    raw = CoilFolder(tmp_path).image(2, 15.0)
+    assert float(raw[0, 0, 0]) == pytest.approx(110 / 255)
+
+
+@pytest.mark.filterwarnings("ignore::torch_eigview.datasets.coil.PoseStepWarning")  # 4 views named 0..3
+def test_background_errors_name_the_file(tmp_path: Path) -> None:
+    _backdrop_folder(tmp_path)
+    with pytest.raises(TypeError, match="background must be a BackgroundModel or None, got tuple"):
+        CoilFolder(tmp_path, background=(0.4,))  # type: ignore[arg-type]
+    _write(tmp_path, "obj1__5.png", np.full((16, 16), 110, dtype=np.uint8))  # no object in view
+    folder = CoilFolder(tmp_path, background=BackgroundModel(background=(110 / 255,), tolerance=8 / 255))
+    with pytest.raises(ValueError, match=r"obj1__5\.png: .*leaves no object"):
+        folder.image(1, 25.0)

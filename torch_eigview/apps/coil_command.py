@@ -22,6 +22,7 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
     workers_arg,
 )
+from torch_eigview.apps.view_inputs import add_background_arguments, background_from_args
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
@@ -121,6 +122,9 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         metavar="DEG",
         help="degrees between pose indices (default 5, COIL-20's): 10 for a turntable of 36 views named "
         "obj1__0.png .. obj1__35.png",
+    )
+    add_background_arguments(
+        coil, auto="auto: the foreground estimated from each image's border colours (backdrop and table)"
     )
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
@@ -273,6 +277,7 @@ def run_coil(args: argparse.Namespace) -> int:
         pose_unit=args.pose_unit,
         pose_step=args.pose_step,
         device=_device(args.device),
+        background=background_from_args(args),
     )
     # An output inside the folder must not replace one of the images the run reads.
     check_outputs(

@@ -25,6 +25,7 @@ __all__ = [
     "add_manifest_arguments",
     "background_arg",
     "background_fields",
+    "background_from_args",
     "background_model",
     "check_not_views",
     "label_table",
@@ -74,15 +75,21 @@ def _tolerance_arg(text: str) -> float:
     return value
 
 
-def add_background_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--background keep|auto|R,G,B`` and ``--tolerance T`` (both on the 0-255 scale)."""
+_AUTO_HELP = (
+    "auto: each view's mask (manifest mask column, alpha channel) where given, else the foreground "
+    "estimated from the border's colours"
+)
+
+
+def add_background_arguments(parser: argparse.ArgumentParser, auto: str = _AUTO_HELP) -> None:
+    """``--background keep|auto|R,G,B`` and ``--tolerance T`` (both on the 0-255 scale);
+    ``auto`` the help's words for ``--background auto``."""
     parser.add_argument(
         "--background",
         type=background_arg,
         default="keep",
         metavar="keep|auto|R,G,B",
-        help="keep: pixels as read (black-background data); auto: each view's mask (manifest mask "
-        "column, alpha channel) where given, else the foreground estimated from the border's colours; "
+        help=f"keep: pixels as read (black-background data); {auto}; "
         "R,G,B: that background colour, 0-255. Except with keep the background is set to 0",
     )
     parser.add_argument(
@@ -109,6 +116,21 @@ def background_fields(args: argparse.Namespace) -> dict[str, Any]:
     if isinstance(choice, tuple):
         return {"background": "colour", "colour": choice, "tolerance": tolerance}
     return {"background": choice, "colour": None, "tolerance": tolerance}
+
+
+def background_from_args(args: argparse.Namespace) -> BackgroundModel | None:
+    """The :class:`~torch_eigview.datasets.background.BackgroundModel` of ``--background`` and
+    ``--tolerance`` (background set to 0), or None for ``keep``.
+
+    Raises:
+        ValueError: ``--tolerance`` with ``--background keep``.
+    """
+    from torch_eigview.datasets.background import BackgroundModel
+
+    fields = background_fields(args)
+    if fields["background"] == "keep":
+        return None
+    return BackgroundModel(background=fields["colour"], tolerance=fields["tolerance"])
 
 
 def background_model(prep: Preprocessing) -> BackgroundModel | None:

@@ -14,7 +14,6 @@ import numbers
 import operator
 import os
 import re
-import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -22,7 +21,19 @@ import numpy as np
 import torch
 
 from torch_eigview.check import as_angle_tensor, check_choice, check_limit, check_number
-from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
+from torch_eigview.datasets.background import BackgroundModel, set_background
+from torch_eigview.datasets.coil_names import (
+    ANGLE_TOL,
+    INDEX_STEP,
+    POSE_UNITS,
+    PoseStepWarning,
+    check_pose_step,
+    pose_files,
+    resolve_pose_unit,
+    scan_files,
+    warn_whole_circle,
+)
+from torch_eigview.io.images import read_image, to_unit_float
 
 __all__ = [
     "DATA_ENV",
@@ -36,13 +47,8 @@ __all__ = [
 #: The environment variable naming the folder that holds the data sets (``coil-20-proc/``, …).
 DATA_ENV = "TORCH_EIGVIEW_DATA"
 
-# re.ASCII: ``\d`` alone would also accept non-ASCII digits such as "obj١__0.png".
-_FILE_RE = re.compile(r"obj([0-9]+)__([0-9]+)\.png", re.ASCII)
+# re.ASCII: ``\d`` alone would also accept non-ASCII digits such as "١-3".
 _SPEC_RE = re.compile(r"\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?", re.ASCII)
-_POSE_UNITS = ("auto", "index", "degrees")
-_N_INDEX_POSES = 72  # COIL-20: pose indices 0..71, 5 degrees apart
-_INDEX_STEP = 5.0  # COIL-20: degrees between consecutive pose indices
-_ANGLE_TOL = 1e-6  # degrees
 # A source checkout keeps its data beside it, in ../shared/data (this file is
 # <checkout>/torch_eigview/datasets/coil.py); an installed copy has no such folder.
 _CHECKOUT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
@@ -134,96 +140,6 @@ def parse_object_spec(spec: str) -> list[int]:
     return sorted(ids)
 
 
-def _scan(root: Path) -> list[tuple[int, int, Path]]:
-    """``(object, pose, path)`` of the COIL-named files of ``root``.
-
-    Every name that matches is checked with ``os.stat`` (never opened): a FIFO, a device, a
-    folder or a symlink loop named like an image is an error that names them all, not a file
-    silently left out of the data set.
-    """
-    found, bad = [], []
-    for p in root.iterdir():
-        m = _FILE_RE.fullmatch(p.name)
-        if m is None:
-            continue
-        try:
-            check_regular_file(p, "COIL file")
-        except ValueError as exc:
-            bad.append(str(exc))
-            continue
-        found.append((int(m.group(1)), int(m.group(2)), p))
-    if bad:
-        listed = "; ".join(sorted(bad)[:5]) + (f"; ... ({len(bad)} in all)" if len(bad) > 5 else "")
-        raise ValueError(f"root={str(root)!r} holds COIL-named entries that are not image files: {listed}")
-    return found
-
-
-def _pose_unit(found: list[tuple[int, int, Path]]) -> str:
-    """``pose_unit="auto"``: each object's own poses say "degrees" (some P >= 72) or "index"
-    (all P < 72); objects that disagree are an error naming the files, so that one stray
-    ``obj1__72.png`` cannot turn a COIL-20 folder's indices into degrees."""
-    highest: dict[int, int] = {}
-    for obj, pose, _ in found:
-        highest[obj] = max(highest.get(obj, 0), pose)
-    degree_objects = {obj for obj, top in highest.items() if top >= _N_INDEX_POSES}
-    if not degree_objects:
-        return "index"
-    if len(degree_objects) == len(highest):
-        return "degrees"
-    strays = sorted(p.name for obj, pose, p in found if pose >= _N_INDEX_POSES)
-    listed = ", ".join(strays[:5]) + (f", ... ({len(strays)} files)" if len(strays) > 5 else "")
-    index_objects = sorted(set(highest) - degree_objects)
-    raise ValueError(
-        f"the folder mixes pose conventions: objects {sorted(degree_objects)[:10]} have poses P >= "
-        f"{_N_INDEX_POSES} (degrees, COIL-100) in {listed}, while objects {index_objects[:10]} have only "
-        f"P < {_N_INDEX_POSES} (indices, COIL-20); remove the stray files or pass pose_unit='index' or "
-        "'degrees' (eigview coil --pose-unit)"
-    )
-
-
-class PoseStepWarning(UserWarning):
-    """Pose indices read with COIL-20's 5° step that look like a whole turntable at another
-    step: every object has the views ``0 … N − 1``, 3 <= N < 72 (see ``CoilFolder(pose_step=)``)."""
-
-
-def _check_step(pose_step: float | None, pose_unit: str) -> float | None:
-    """``pose_step`` checked: None, or a finite number of degrees in (0, 360] for index poses."""
-    if pose_step is None:
-        return None
-    step = check_number(pose_step, "pose_step")
-    if not (math.isfinite(step) and 0 < step <= 360):
-        raise ValueError(f"pose_step must be a number of degrees in (0, 360], got {pose_step!r}")
-    if pose_unit == "degrees":
-        raise ValueError(
-            f"pose_step={pose_step!r} is the step between pose indices, so it needs pose_unit='index' "
-            "or 'auto', got pose_unit='degrees' (its file poses are degrees already)"
-        )
-    return float(step)
-
-
-def _warn_whole_circle(root: Path, files: dict[int, dict[float, Path]]) -> None:
-    """A :class:`PoseStepWarning` where every object holds the indices 0 … N − 1, 3 <= N < 72
-    (fewer than three views round a turntable are 180° apart or a single view):
-    read 5° apart they cover 0 … 5·(N − 1)°, the first part of COIL-20's circle, while N
-    views of a turntable named by index are 360 / N degrees apart; nothing in the files
-    tells the two apart."""
-    counts = {len(views) for views in files.values()}
-    if len(counts) != 1:
-        return
-    n = counts.pop()
-    expected = {_INDEX_STEP * i for i in range(n)}
-    if not 3 <= n < _N_INDEX_POSES or any(set(views) != expected for views in files.values()):
-        return
-    warnings.warn(
-        f"{root}: every object has the pose indices 0..{n - 1}, read with COIL-20's step of "
-        f"{_INDEX_STEP:g} degrees as 0..{_INDEX_STEP * (n - 1):g} degrees; if the {n} views go once round "
-        f"the turntable they are {360 / n:g} degrees apart: pass pose_step={360 / n:g} "
-        f"(eigview coil --pose-step {360 / n:g})",
-        PoseStepWarning,
-        stacklevel=3,
-    )
-
-
 class CoilFolder:
     """A folder of COIL-style images ``obj{O}__{P}.png``, read lazily and cached.
 
@@ -245,6 +161,11 @@ class CoilFolder:
             the step is not given: N views once round a turntable are ``360 / N`` apart.
         dtype: Floating dtype of the returned tensors.
         device: Device of the returned tensors (files are read and decoded on the CPU).
+        background: a :class:`~torch_eigview.datasets.background.BackgroundModel` whose
+            masks (estimated from each image's border, or from its colour) set every view's
+            background to the model's ``fill`` (0: the black background the COIL pipeline
+            assumes), or None (default) for the pixels as read. Each file's mask is
+            estimated once and cached.
 
     Raises:
         TypeError: ``root`` is not a path, ``pose_unit`` not a str or ``dtype`` not a
@@ -264,20 +185,26 @@ class CoilFolder:
         pose_step: float | None = None,
         dtype: torch.dtype = torch.float32,
         device: torch.device | str = "cpu",
+        background: BackgroundModel | None = None,
     ) -> None:
         if not isinstance(root, (str, os.PathLike)):
             raise TypeError(f"root must be a str or a path, got {type(root).__name__}")
         if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
             raise TypeError(f"dtype must be a floating torch.dtype, got {dtype!r}")
-        pose_unit = check_choice(pose_unit, "pose_unit", _POSE_UNITS)
-        given_step = _check_step(pose_step, pose_unit)
+        pose_unit = check_choice(pose_unit, "pose_unit", POSE_UNITS)
+        if background is not None and not isinstance(background, BackgroundModel):
+            raise TypeError(f"background must be a BackgroundModel or None, got {type(background).__name__}")
+        #: The background rule applied to every view read, or None.
+        self.background = background
+        self._masks: dict[Path, torch.Tensor] = {}
+        given_step = check_pose_step(pose_step, pose_unit)
         self.root = Path(root)
         if not self.root.is_dir():
             raise ValueError(f"root={str(self.root)!r} must be an existing directory")
-        found = _scan(self.root)
+        found = scan_files(self.root)
         if not found:
             raise ValueError(f"root={str(self.root)!r} holds no COIL files (obj{{O}}__{{P}}.png)")
-        self.pose_unit = _pose_unit(found) if pose_unit == "auto" else pose_unit
+        self.pose_unit = resolve_pose_unit(found) if pose_unit == "auto" else pose_unit
         pose_unit = self.pose_unit
         self.dtype = dtype
         self.device = torch.device(device)
@@ -287,22 +214,10 @@ class CoilFolder:
                 "are degrees (some P >= 72; pose_unit 'auto' resolved to 'degrees')"
             )
         #: Degrees between consecutive file poses P.
-        self.pose_step = (_INDEX_STEP if given_step is None else given_step) if pose_unit == "index" else 1.0
-        step = self.pose_step
-        limit = math.ceil(360 / step - _ANGLE_TOL) if pose_unit == "index" else 360
-        self._files: dict[int, dict[float, Path]] = {}
-        for obj, p, path in sorted(found):
-            if p >= limit:
-                raise ValueError(
-                    f"pose_unit={pose_unit!r} with {step:g} degrees a pose needs P in 0..{limit - 1} "
-                    f"(angles in [0, 360)), got {path}"
-                )
-            views = self._files.setdefault(obj, {})
-            if step * p in views:
-                raise ValueError(f"{path} and {views[step * p]} name the same view (object {obj})")
-            views[step * p] = path
+        self.pose_step = (INDEX_STEP if given_step is None else given_step) if pose_unit == "index" else 1.0
+        self._files = pose_files(found, pose_unit, self.pose_step)
         if pose_unit == "index" and given_step is None:
-            _warn_whole_circle(self.root, self._files)
+            warn_whole_circle(self.root, self._files)
         first_path = min(found)[2]
         first = read_image(first_path)
         c, h, w = first.shape
@@ -320,7 +235,9 @@ class CoilFolder:
     def __repr__(self) -> str:
         return (
             f"CoilFolder(root={str(self.root)!r}, objects={len(self._files)}, files={len(self)}, "
-            f"pose_unit={self.pose_unit!r}, pose_step={self.pose_step:g}, image_shape={self.image_shape})"
+            f"pose_unit={self.pose_unit!r}, pose_step={self.pose_step:g}, image_shape={self.image_shape}"
+            + ("" if self.background is None else f", background={self.background!r}")
+            + ")"
         )
 
     def poses(self, obj: int) -> list[float]:
@@ -349,7 +266,7 @@ class CoilFolder:
             raise TypeError(f"degrees must be a number, got {type(degrees).__name__}")
         if not math.isfinite(degrees):
             raise ValueError(f"degrees={degrees} must be finite")
-        return self._to_tensor(self._read(self._find(obj, float(degrees))))
+        return self._load(self._find(obj, float(degrees)))
 
     def images(self, obj: int, degrees_list: Sequence[float] | torch.Tensor) -> torch.Tensor:
         """Returns the views of object ``obj`` at each angle of ``degrees_list`` ``(T,)``.
@@ -358,7 +275,7 @@ class CoilFolder:
             A tensor ``(T, C, H, W)`` of ``self.dtype``.
         """
         angles = as_angle_tensor(degrees_list, "degrees_list").tolist()
-        return torch.stack([self._to_tensor(self._read(self._find(obj, a))) for a in angles])
+        return torch.stack([self._load(self._find(obj, a)) for a in angles])
 
     def load_all(
         self, objects: Iterable[int] | None = None
@@ -377,7 +294,7 @@ class CoilFolder:
             for deg, path in sorted(self._views(obj).items()):
                 labels.append(obj)
                 poses.append(deg)
-                imgs.append(self._to_tensor(self._read(path)))
+                imgs.append(self._load(path))
         labels_t, poses_t = torch.tensor(labels, dtype=torch.int64), torch.tensor(poses, dtype=torch.float64)
         return torch.stack(imgs), labels_t, poses_t
 
@@ -395,7 +312,7 @@ class CoilFolder:
         wrapped = degrees % 360.0
         for deg, path in views.items():
             diff = abs(wrapped - deg)
-            if min(diff, 360.0 - diff) <= _ANGLE_TOL:  # circular, so 359.9999999 finds 0
+            if min(diff, 360.0 - diff) <= ANGLE_TOL:  # circular, so 359.9999999 finds 0
                 return path
         have = [f"{v:g}" for v in sorted(views)]
         if len(have) > 8:
@@ -404,6 +321,21 @@ class CoilFolder:
             f"obj={obj} has no image at degrees={degrees!r} ({wrapped!r} mod 360); "
             f"available: [{', '.join(have)}] ({len(views)} poses)"
         )
+
+    def _load(self, path: Path) -> torch.Tensor:
+        """The view in ``path`` as a new (C, H, W) tensor, its background set where
+        :attr:`background` says (the file's mask estimated once, then cached)."""
+        view = self._to_tensor(self._read(path))
+        if self.background is None or self.background.fill is None:
+            return view
+        mask = self._masks.get(path)
+        if mask is None:
+            try:
+                mask = self.background.masks(view[None])[0]
+            except ValueError as exc:  # e.g. the colour leaves no object: name the file
+                raise ValueError(f"{path}: {exc}") from None
+            self._masks[path] = mask
+        return set_background(view[None], mask[None], self.background.fill)[0]
 
     def _read(self, path: Path) -> np.ndarray:
         cached = self._cache.get(path)
