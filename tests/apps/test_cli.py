@@ -15,6 +15,7 @@ import skimage.io
 
 from torch_eigview.apps.cli import main
 from torch_eigview.apps.cli_args import progress_bar
+from torch_eigview.apps.view_inputs import model_preprocessing
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.io.checkpoint import load_recognizer
 
@@ -205,8 +206,14 @@ def test_a_gray_backdrop_set_to_zero(tmp_path: Path, capsys: pytest.CaptureFixtu
     json_path.parent.mkdir()
     args = ["coil", "--root", str(tmp_path), "--alpha", "10", "--test", "-10", "10", "--method", "dense"]
     args += ["--components", "3", "--quiet", "--json", str(json_path)]
-    assert main([*args, "--background", "110", "--tolerance", "8"]) == 0
+    model_path = tmp_path / "out" / "model.pt"
+    assert main([*args, "--background", "110", "--tolerance", "8", "--save", str(model_path)]) == 0
     assert json.loads(json_path.read_text())["n_test"] == 2 * 5
+    # The saved model records the rule, so predict and evaluate key the backdrop out too.
+    recognizer, meta = load_recognizer(model_path)
+    prep = model_preprocessing(recognizer, meta, str(model_path))
+    assert (prep.background, prep.colour, prep.tolerance) == ("colour", (110 / 255,), 8 / 255)
+    assert prep.image_shape == (1, 12, 12)
     code, err = _exit_status([*args, "--tolerance", "8"], capsys)
     assert code == 2 and "--tolerance goes with --background auto or R,G,B, not with keep" in err
     code, err = _exit_status([*args, "--background", "gray"], capsys)
