@@ -22,7 +22,7 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
     workers_arg,
 )
-from torch_eigview.apps.view_inputs import add_background_arguments, background_fields, background_from_args
+from torch_eigview.apps.view_inputs import add_background_arguments, background_fields, model_of_background
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
@@ -272,12 +272,13 @@ def run_coil(args: argparse.Namespace) -> int:
 
     outputs = [("--json", args.json), ("--save", args.save)]
     check_outputs(outputs, inputs=[("--root", args.root)])
+    background = background_fields(args)
     folder = CoilFolder(
         find_coil_root(args.root),
         pose_unit=args.pose_unit,
         pose_step=args.pose_step,
         device=_device(args.device),
-        background=background_from_args(args),
+        background=model_of_background(**background),
     )
     # An output inside the folder must not replace one of the images the run reads.
     check_outputs(
@@ -324,11 +325,11 @@ def run_coil(args: argparse.Namespace) -> int:
         write_json(args.json, result.to_json())
     if args.save:
         meta = {"command": "coil", "alpha": args.alpha, "method": args.method, "accuracy": result.accuracy}
-        if args.background != "keep":  # predict and evaluate then key the backdrop out the same way
+        if background["background"] != "keep":  # predict and evaluate then key the backdrop out the same way
             from torch_eigview.io.preprocessing import Preprocessing
 
             c, h, w = folder.image_shape
-            prep = Preprocessing((h, w), c, unit_norm=not args.no_unit_norm, **background_fields(args))
+            prep = Preprocessing((h, w), c, unit_norm=not args.no_unit_norm, **background)
             meta["preprocessing"] = prep.to_json()
         save_recognizer(args.save, result.recognizer, meta)
     return 0

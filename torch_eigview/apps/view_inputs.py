@@ -25,13 +25,13 @@ __all__ = [
     "add_manifest_arguments",
     "background_arg",
     "background_fields",
-    "background_from_args",
     "background_model",
     "check_not_views",
     "label_table",
     "load_manifest",
     "load_model",
     "manifest_inputs",
+    "model_of_background",
     "model_preprocessing",
 ]
 
@@ -118,29 +118,23 @@ def background_fields(args: argparse.Namespace) -> dict[str, Any]:
     return {"background": choice, "colour": None, "tolerance": tolerance}
 
 
-def background_from_args(args: argparse.Namespace) -> BackgroundModel | None:
-    """The :class:`~torch_eigview.datasets.background.BackgroundModel` of ``--background`` and
-    ``--tolerance`` (background set to 0), or None for ``keep``.
-
-    Raises:
-        ValueError: ``--tolerance`` with ``--background keep``.
-    """
-    from torch_eigview.datasets.background import BackgroundModel
-
-    fields = background_fields(args)
-    if fields["background"] == "keep":
-        return None
-    return BackgroundModel(background=fields["colour"], tolerance=fields["tolerance"])
-
-
 def background_model(prep: Preprocessing) -> BackgroundModel | None:
     """The :class:`~torch_eigview.datasets.background.BackgroundModel` a preprocessing
     record applies (background set to 0), or None for ``"keep"``."""
+    return model_of_background(prep.background, prep.colour, prep.tolerance)
+
+
+def model_of_background(
+    background: str, colour: tuple[float, ...] | None, tolerance: float | None
+) -> BackgroundModel | None:
+    """The :class:`~torch_eigview.datasets.background.BackgroundModel` of a background rule,
+    the fields of :func:`background_fields` or of a preprocessing record (background set
+    to 0), or None for ``"keep"``."""
     from torch_eigview.datasets.background import BackgroundModel
 
-    if prep.background == "keep":
+    if background == "keep":
         return None
-    return BackgroundModel(background=prep.colour, tolerance=prep.tolerance)
+    return BackgroundModel(background=colour, tolerance=tolerance)
 
 
 def manifest_inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:
