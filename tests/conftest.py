@@ -6,12 +6,14 @@ pytest then uses the local one, so these are defaults, not requirements.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 import torch
 
 from torch_eigview import CoilFolder
+from torch_eigview.datasets.coil import DATA_ENV
 
 # One tolerance per dtype: float32 keeps about 7 digits, float64 about 16; the warp and the
 # camera model lose a few digits to trigonometry and bilinear weights, not more.
@@ -44,10 +46,15 @@ def tol(dtype: torch.dtype) -> dict[str, float]:
 
 @pytest.fixture(scope="session")
 def coil_root() -> Path:
-    """The processed COIL-20 images in ``../shared/data/coil-20-proc``; skips when absent."""
-    root = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"
+    """The processed COIL-20 images: ``$TORCH_EIGVIEW_DATA/coil-20-proc`` where that variable
+    is set (as the commands read it; a machine the checkout's ``../shared`` does not reach),
+    else ``../shared/data/coil-20-proc`` beside the checkout; skips when absent."""
+    env = os.environ.get(DATA_ENV, "")
+    data = Path(env).expanduser() if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    root = data / "coil-20-proc"
     if not root.is_dir():
-        pytest.skip(f"COIL-20 not found at {root}: ../shared/data/coil-20-proc is absent")
+        where = f"{DATA_ENV}={env}" if env else f"../shared/data ({DATA_ENV} unset)"
+        pytest.skip(f"COIL-20 not found at {root}: no coil-20-proc in {where}")
     return root
 
 
