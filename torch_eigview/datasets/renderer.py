@@ -255,8 +255,8 @@ def render_many(
             out.append(Render(image[None].to(dtype), depth.to(dtype), mask, points.to(dtype), theta))
             continue
         rgb = image[None].repeat(3, 1, 1)
-        bg_origin, bg_direction = cam.rays(x[~mask], y[~mask])
-        rgb[:, ~mask] = backdrop.shade(bg_origin, bg_direction).T
+        background = ~mask.reshape(-1)  # the rays of the call, not cast again
+        rgb[:, ~mask] = backdrop.shade(origin[background], direction[background]).T
         out.append(Render(rgb.to(dtype), depth.to(dtype), mask, points.to(dtype), theta))
     return out
 

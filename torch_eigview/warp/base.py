@@ -21,7 +21,7 @@ from torch_eigview.check import as_angle_tensor, check_alpha, check_float_tensor
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.warp.maps import WarpMaps, _renormalize
 
-__all__ = ["BLENDS", "ViewWarp"]
+__all__ = ["BLENDS", "ViewWarp", "kornia_scale"]
 
 #: How two seed views that both see a target pixel share it (a view warp's ``blend``).
 BLENDS = ("linear", "nearest")
@@ -217,6 +217,15 @@ class ViewWarp(torch.nn.Module):
         return out[0] if unbatched else out
 
 
+def kornia_scale(n: int, like: torch.Tensor) -> tuple[torch.Tensor, float]:
+    """kornia's ``normalize_pixel_coordinates`` along an axis of ``n`` pixels: the grid
+    coordinate of pixel x is ``x * factor - offset``, the factor ``2 / (n - 1)`` divided in
+    ``like``'s dtype (as kornia divides), the offset 1; 1 and 0 for a single pixel. The
+    one rule of the samplers that must give ``remap``'s samples bit for bit."""
+    one = torch.ones((), dtype=like.dtype, device=like.device)
+    return (one, 0.0) if n == 1 else (2.0 / (one * n - 1.0), 1.0)
+
+
 def _sample_views(
     views: list[torch.Tensor], src_x: torch.Tensor, src_y: torch.Tensor | None, row0: int = 0
 ) -> list[torch.Tensor]:
@@ -239,11 +248,7 @@ def _sample_views(
     b, _, h, w = views[0].shape
     t, rows = src_x.shape[2], src_x.shape[3]
     dtype, device = views[0].dtype, views[0].device
-    one = torch.ones((), dtype=dtype, device=device)
-    # kornia's normalize_pixel_coordinates: the factor is a division in the views' dtype.
-    fx = one if w == 1 else 2.0 / (one * w - 1.0)
-    fy = one if h == 1 else 2.0 / (one * h - 1.0)
-    ox, oy = (0.0 if w == 1 else 1.0), (0.0 if h == 1 else 1.0)
+    (fx, ox), (fy, oy) = kornia_scale(w, views[0]), kornia_scale(h, views[0])
     ys = (
         torch.arange(row0, row0 + rows, dtype=dtype, device=device).view(rows, 1)
         if src_y is None

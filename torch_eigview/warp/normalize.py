@@ -14,6 +14,7 @@ import torch.nn.functional as F
 from kornia.geometry.transform import remap
 
 from torch_eigview.check import check_float_tensor, check_ndim
+from torch_eigview.warp.base import kornia_scale
 
 __all__ = [
     "FILLED_FRAME",
@@ -189,15 +190,15 @@ def _sample_separable(images: torch.Tensor, map_x: torch.Tensor, map_y: torch.Te
     """kornia ``remap`` (bilinear, zeros, ``align_corners=True``) of (P, C, H, W) ``images``
     at a separable map, columns ``map_x`` (P, 1, W) and rows ``map_y`` (P, H, 1): the same
     samples bit for bit. The coordinates are normalized with kornia's formula (the factor
-    ``2 / (n − 1)`` rounded to the images' dtype, times the pixel, plus −1) on the W + H
-    values, not on every pixel, where ``remap`` spent about half its time (7 of 13 ms a call
+    ``2 / (n − 1)`` divided in the images' dtype, times the pixel, minus 1) on the W + H
+    values (:func:`~torch_eigview.warp.base.kornia_scale`, as the view sampler does), not
+    on every pixel, where ``remap`` spent about half its time (7 of 13 ms a call
     in a profile of 41 views of 128 × 128 on one thread); the grid is two planes read as
     (…, 2) pairs."""
     p, _, h, w = images.shape
     planes = images.new_empty(2, p, h, w)
     for plane, coord, n in ((planes[0], map_x, w), (planes[1], map_y, h)):
-        factor, offset = (1.0, 0.0) if n == 1 else (2.0 / (n - 1.0), -1.0)
-        scaled = coord * torch.tensor(factor, dtype=images.dtype, device=images.device)
-        plane.copy_((scaled + torch.tensor(offset, dtype=images.dtype, device=images.device)).expand(p, h, w))
+        factor, offset = kornia_scale(n, images)
+        plane.copy_((coord * factor - offset).expand(p, h, w))
     grid = planes.permute(1, 2, 3, 0)
     return F.grid_sample(images, grid, mode="bilinear", padding_mode="zeros", align_corners=True)
