@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 from torch_eigview import CoilFolder, SynthesisOptions
-from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.datasets import find_coil_root
 
 PAPER = {5: 97.89, 10: 93.42, 15: 91.42}

@@ -21,7 +21,7 @@ import argparse
 import time
 
 from torch_eigview import CoilFolder, KernelEigenspace, KernelProjection
-from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.datasets import find_coil_root
 
 METHODS: dict[str, dict[str, object]] = {

@@ -36,7 +36,7 @@ from collections.abc import Callable
 import torch
 
 from torch_eigview.apps.cli_args import objects_arg
-from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.datasets import CoilFolder, find_coil_root
 from torch_eigview.geometry.angles import wrap_degrees
 from torch_eigview.geometry.flow import estimate_correspondence

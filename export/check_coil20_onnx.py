@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 
 from torch_eigview import CoilFolder
-from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.io.onnx import compare_with_eager, export_projection, export_recognizer
 
 DEFAULT_ROOT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "coil-20-proc"

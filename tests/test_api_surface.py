@@ -27,6 +27,7 @@ PUBLIC = [
     "SynthesisOptions",
     "SynthesizedViews",
     "affine_coefficients",
+    "environment_info",
     "estimate_correspondence",
     "estimate_elevation",
     "load_recognizer",

@@ -25,10 +25,23 @@ ALLOWED: dict[str, set[str]] = {
     "scale": {"base", "geometry", "warp", "synthesis", "nn", "decomposition"},
     "io": {"base", "nn"},
     "datasets": {"base", "geometry", "io"},
-    "method": {"base", "geometry", "warp", "synthesis", "nn", "decomposition"},
+    "method": {"base", "geometry", "warp", "synthesis", "nn", "decomposition", "scale"},
     "sklearn": {"base", "geometry", "warp", "synthesis", "nn", "decomposition", "method"},
+    "evaluation": {
+        "base",
+        "geometry",
+        "warp",
+        "synthesis",
+        "nn",
+        "decomposition",
+        "scale",
+        "io",
+        "datasets",
+        "method",
+    },
     "apps": {
         "base",
+        "evaluation",
         "geometry",
         "warp",
         "synthesis",
@@ -49,7 +62,7 @@ def _unit(module: str) -> str:
     if len(parts) == 1:
         return "root"
     head = parts[1]
-    if head in ("errors", "check", "lazy", "files"):
+    if head in ("errors", "check", "lazy", "files", "environment"):
         return "base"
     if head in ("__init__", "__main__"):
         return "root"

@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from torch_eigview.decomposition.eigenspace import Eigenspace
     from torch_eigview.decomposition.kernel import KernelEigenspace
     from torch_eigview.decomposition.streaming import StreamingEigenspace
+    from torch_eigview.environment import environment_info
     from torch_eigview.errors import NotFittedError
     from torch_eigview.geometry.correspondence import Correspondence
     from torch_eigview.geometry.flow import estimate_correspondence
@@ -59,6 +60,7 @@ _SOURCES = {
     "SynthesisOptions": "synthesis",
     "SynthesizedViews": "synthesis",
     "affine_coefficients": "geometry.pose",
+    "environment_info": "environment",
     "estimate_correspondence": "geometry.flow",
     "estimate_elevation": "geometry.pose",
     "load_recognizer": "io.checkpoint",
@@ -84,6 +86,7 @@ __all__ = [
     "SynthesisOptions",
     "SynthesizedViews",
     "affine_coefficients",
+    "environment_info",
     "estimate_correspondence",
     "estimate_elevation",
     "load_recognizer",

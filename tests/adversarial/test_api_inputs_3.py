@@ -13,11 +13,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from torch_eigview.apps.circle import synthesize_circle
 from torch_eigview.method import FewViewEigenspace
 from torch_eigview.method.rejection import calibrate_rejection
 from torch_eigview.scale.thread_policy import for_products, idle_cpus, threads
-from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+from torch_eigview.synthesis import SynthesisOptions, synthesize_circle, synthesize_views
 from torch_eigview.warp.normalize import resolve_extent
 
 from tests.adversarial import files, views

@@ -17,9 +17,9 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import parse_object_spec
 from torch_eigview.decomposition import Eigenspace, KernelEigenspace, StreamingEigenspace
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.geometry.correspondence import correspondence_from_disparity
 from torch_eigview.geometry.flow import estimate_correspondence
 from torch_eigview.geometry.pose import orthographic_coefficients

@@ -12,11 +12,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from torch_eigview.apps.circle import circle_layout, synthesize_circle
 from torch_eigview.apps.cli import main
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.synthesis import SynthesisOptions
+from torch_eigview.evaluation.circle import circle_layout
+from torch_eigview.evaluation.coil import CoilExperiment
+from torch_eigview.synthesis import SynthesisOptions, synthesize_circle
 
 COIL20 = [5.0 * i for i in range(72)]
 OBJECTS = [1, 2]

@@ -222,7 +222,7 @@ def test_a_gray_backdrop_set_to_zero(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--root`` defaults to ``$TORCH_EIGVIEW_DATA/coil-20-proc``; the flag wins over it."""
-    from torch_eigview.apps import experiment
+    from torch_eigview.evaluation import coil as experiment
 
     seen: list[Path] = []
 

@@ -46,7 +46,7 @@ def test_device_cuda_without_a_gpu(coil_root: Path, capsys: pytest.CaptureFixtur
 def test_threads_applied_in_the_command_and_restored(
     coil_root: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import torch_eigview.apps.object_synthesis as experiment  # where the gallery synthesis runs
+    import torch_eigview.scale.galleries as experiment  # where the gallery synthesis runs
 
     seen: list[int] = []
     original = experiment.synthesize_views

@@ -10,13 +10,12 @@ import pytest
 import torch
 
 from torch_eigview.apps import diagnose_chained
-from torch_eigview.apps.circle import synthesize_circle
 from torch_eigview.apps.diagnose import TABLES
 from torch_eigview.apps.diagnose_chained import ChainedExperiment, chained_geometry, chained_table
 from torch_eigview.apps.diagnose_flow import chained_disparity
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.synthesis import SynthesisOptions, pair_geometry
+from torch_eigview.evaluation.coil import CoilExperiment
+from torch_eigview.synthesis import SynthesisOptions, pair_geometry, synthesize_circle
 
 
 def test_geometry_is_the_chained_motion(folder: CoilFolder) -> None:

@@ -9,8 +9,8 @@ import math
 import pytest
 import torch
 
-from torch_eigview.apps.experiment import CoilExperiment, CoilResult, angle_range, wrap_degrees
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.evaluation.coil import CoilExperiment, CoilResult, angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions
 
 OBJECTS = [1, 2, 3]

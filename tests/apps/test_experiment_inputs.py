@@ -9,8 +9,8 @@ import warnings
 import pytest
 import torch
 
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions
 
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 import torch
 
-import torch_eigview.apps.object_synthesis as object_synthesis
+import torch_eigview.scale.galleries as object_synthesis
 from torch_eigview.apps.cli import main
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.scale.parallel import PARALLEL_PIXELS, available_cpus, object_workers
 from torch_eigview.scale.thread_policy import threads
 from torch_eigview.synthesis import ElevationFallbackWarning

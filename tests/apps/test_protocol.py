@@ -8,8 +8,8 @@ import threading
 import pytest
 import torch
 
-from torch_eigview.apps.protocol import build_recognizer, fit_projection, score, stack_gallery
 from torch_eigview.decomposition.eigenspace import Eigenspace
+from torch_eigview.evaluation.scoring import build_recognizer, fit_projection, score, stack_gallery
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection

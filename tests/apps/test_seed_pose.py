@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 import torch
 
-import torch_eigview.apps.experiment as experiment
-import torch_eigview.apps.protocol as protocol
+import torch_eigview.evaluation.coil as experiment
+import torch_eigview.evaluation.scoring as protocol
 from torch_eigview.apps.cli import main
-from torch_eigview.apps.experiment import CoilExperiment
-from torch_eigview.apps.seed_pose import SeedPoses
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.evaluation.coil import CoilExperiment
+from torch_eigview.evaluation.seed_pose import SeedPoses
 from torch_eigview.scale.thread_policy import threads
 from torch_eigview.synthesis import SynthesisOptions
 

@@ -11,9 +11,9 @@ import pytest
 import skimage.io
 import torch
 
-from torch_eigview.apps.circle import grid_step
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.coil import CoilFolder, PoseStepWarning, parse_object_spec
+from torch_eigview.evaluation.circle import grid_step
 from torch_eigview.io import images
 
 COIL20 = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "coil-20-proc"

@@ -219,7 +219,7 @@ def test_rendered_gallery_is_the_ceiling() -> None:
     angles (no synthesis): its codes are those of the renders, not of synthesized views,
     and test views at the gallery's angles are then recognized with their exact pose."""
     from torch_eigview.apps.demo import SyntheticScene, recognition_experiment
-    from torch_eigview.apps.experiment import angle_range
+    from torch_eigview.evaluation.coil import angle_range
 
     shapes = ("head", "cylinder")
     scene = SyntheticScene(shapes=shapes, camera=OrthographicCamera(32))

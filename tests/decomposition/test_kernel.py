@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import torch
 
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.errors import NotFittedError
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.synthesis import SynthesisOptions

@@ -19,7 +19,7 @@ from torch import nn
 import torch_eigview
 from torch_eigview import CoilFolder, EigenProjection, Eigenspace, NearestNeighborRecognizer, NotFittedError
 from torch_eigview.apps.cli import main
-from torch_eigview.apps.experiment import CoilExperiment
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.io.checkpoint import save_recognizer
 from torch_eigview.io.onnx import (
     FoldedProjection,

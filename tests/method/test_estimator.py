@@ -7,12 +7,12 @@ import pytest
 import torch
 from torch.utils.data import DataLoader, TensorDataset
 
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.errors import NotFittedError
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.method import ALL_COMPONENTS, AROUND_SEEDS, FewViewEigenspace, resolve_components
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection

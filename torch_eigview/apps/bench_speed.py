@@ -54,8 +54,8 @@ def bench_stages(root: str, objects: Sequence[int], alpha: float = 10.0) -> dict
     own times; ``maps`` and ``warp`` split the synthesis of each object's first seed pair
     (``NovelViewWarp.maps`` and ``apply_maps``, measured again apart).
     """
-    from torch_eigview.apps.experiment import CoilExperiment
     from torch_eigview.datasets.coil import CoilFolder
+    from torch_eigview.evaluation.coil import CoilExperiment
     from torch_eigview.synthesis import pair_geometry
     from torch_eigview.warp.novel_view import NovelViewWarp
 

@@ -28,8 +28,8 @@ from torch_eigview.files import check_outputs, write_json
 if TYPE_CHECKING:
     import torch
 
-    from torch_eigview.apps.experiment import CoilExperiment, CoilResult
     from torch_eigview.datasets.coil import CoilFolder
+    from torch_eigview.evaluation.coil import CoilExperiment, CoilResult
     from torch_eigview.synthesis import SynthesisOptions
 
 __all__ = ["add_coil_command", "add_synthesis_arguments", "format_table", "run_coil", "synthesis_options"]
@@ -266,8 +266,8 @@ def _check_circle_flags(args: argparse.Namespace) -> None:
 
 
 def run_coil(args: argparse.Namespace) -> int:
-    from torch_eigview.apps.experiment import CoilExperiment
     from torch_eigview.datasets.coil import CoilFolder, find_coil_root
+    from torch_eigview.evaluation.coil import CoilExperiment
     from torch_eigview.io.checkpoint import save_recognizer
 
     outputs = [("--json", args.json), ("--save", args.save)]

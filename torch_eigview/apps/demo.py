@@ -6,7 +6,7 @@ the views synthesized every 1° (Eq. 2, 7; :func:`~torch_eigview.synthesis.synth
 with flow-estimated or exact correspondences); one eigenspace of 15 components spans all
 objects' synthesized views, and the 90 rendered test views per object (−45°..44°, 1°) are
 recognized by their nearest neighbour: the protocol of the COIL experiment
-(:mod:`torch_eigview.apps.protocol`). :func:`run_demo` prints Fig. 2(ii)'s per-object table
+(:mod:`torch_eigview.evaluation.scoring`). :func:`run_demo` prints Fig. 2(ii)'s per-object table
 and draws the eigenimages and, for one object, synthesized views beside rendered ones
 (Fig. 2(f–o)).
 """
@@ -19,7 +19,6 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import torch
 
-from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery
 from torch_eigview.apps.synthetic_scene import (
     SyntheticScene,
     _gallery_angles,
@@ -30,6 +29,7 @@ from torch_eigview.apps.synthetic_scene import (
 from torch_eigview.check import check_choice
 from torch_eigview.datasets import SHAPES, OrthographicCamera
 from torch_eigview.datasets.backdrop import Backdrop
+from torch_eigview.evaluation.scoring import angle_range, build_recognizer, score, stack_gallery
 from torch_eigview.files import atomic_open, check_output_path
 from torch_eigview.lazy import require
 from torch_eigview.nn.projection import EigenProjection

@@ -41,12 +41,12 @@ from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.apps.circle import circle_layout
 from torch_eigview.apps.diagnose_chained import chained_table
 from torch_eigview.apps.diagnose_flow import correspondence_table
 from torch_eigview.apps.diagnose_views import view_gain_table
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
+from torch_eigview.evaluation.circle import circle_layout
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.geometry.angles import angle_range, wrap_degrees
 from torch_eigview.synthesis import SynthesisOptions, pair_geometry
 from torch_eigview.warp.normalize import foreground_mask, normalize_extent, resolve_extent

@@ -26,15 +26,16 @@ from collections.abc import Iterable, Iterator, Sequence
 
 import torch
 
-from torch_eigview.apps.circle import CircleLayout, synthesize_circle
 from torch_eigview.apps.diagnose_flow import chained_disparity
-from torch_eigview.apps.experiment import CoilExperiment
 from torch_eigview.datasets.coil import CoilFolder
+from torch_eigview.evaluation.circle import CircleLayout
+from torch_eigview.evaluation.coil import CoilExperiment
 from torch_eigview.synthesis import (
     PairGeometry,
     SynthesisOptions,
     SynthesizedViews,
     pair_geometry,
+    synthesize_circle,
     synthesize_views,
 )
 
@@ -101,7 +102,7 @@ def chained_geometry(
 
 @dataclasses.dataclass
 class ChainedExperiment(CoilExperiment):
-    """:class:`~torch_eigview.apps.experiment.CoilExperiment` whose ``nvs`` galleries are
+    """:class:`~torch_eigview.evaluation.coil.CoilExperiment` whose ``nvs`` galleries are
     synthesized from :func:`chained_geometry` (in this process, object after object; the
     ``sparse`` and ``dense`` galleries are the experiment's own). Errors and warnings come
     as the synthesis raises them, not named by object as ``eigview coil`` names them."""

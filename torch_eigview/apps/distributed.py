@@ -58,8 +58,8 @@ def _local_views(args: argparse.Namespace, rank: int, world: int) -> torch.Tenso
         objects = list(range(args.objects))[rank::world]
         blocks = [smooth_views(o, 41, 1, args.size) for o in objects]
     else:
-        from torch_eigview.apps.experiment import angle_range
         from torch_eigview.datasets.coil import CoilFolder
+        from torch_eigview.evaluation.coil import angle_range
         from torch_eigview.synthesis import synthesize_views
 
         folder = CoilFolder(args.root)

@@ -2,7 +2,7 @@
 
 Every view of an object the model knows is recognized after the model's own
 preprocessing (:class:`~torch_eigview.io.preprocessing.Preprocessing`) and scored as
-``eigview coil`` scores its test views (:func:`~torch_eigview.apps.protocol.score`):
+``eigview coil`` scores its test views (:func:`~torch_eigview.evaluation.scoring.score`):
 accuracy, per-object accuracy, and the pose error (wrapped to (-180, 180]) of the correctly
 recognized views, mean and median. A bad row (a missing or corrupt file, a mask of
 another size or all background, a background colour that leaves no object, a non-numeric
@@ -131,8 +131,8 @@ def _tests(
     """Per known object its readable views (B, C, H, W) and true poses (B,), read lazily."""
     import torch
 
-    from torch_eigview.apps.protocol import wrap_degrees
     from torch_eigview.datasets.image_views import read_view
+    from torch_eigview.evaluation.scoring import wrap_degrees
 
     background = background_model(prep)
     for obj, entries in groups.items():
@@ -229,7 +229,7 @@ def evaluate(
         ValueError: no view of an object the model knows could be read; ``reject`` with a
             model that has no calibrated rejection.
     """
-    from torch_eigview.apps.protocol import score
+    from torch_eigview.evaluation.scoring import score
 
     skipped = [] if skipped is None else skipped
     table = label_table(recognizer)

@@ -152,8 +152,7 @@ def _gallery(
     """One object's synthesized gallery views and their poses (degrees, unwrapped), and its
     views at the ``held`` angles (from :func:`held_out_thetas`), from its seed views
     (V, C, H, W) and their masks (V, H, W) or None (the brightness threshold)."""
-    from torch_eigview.apps.circle import synthesize_circle
-    from torch_eigview.synthesis import synthesize_views
+    from torch_eigview.synthesis import synthesize_circle, synthesize_views
 
     views, masks = seeds
     try:
@@ -200,7 +199,7 @@ def _read_seeds(
 
 def run_fit(args: argparse.Namespace) -> int:
     """Runs ``eigview fit`` on parsed arguments; returns the exit status."""
-    from torch_eigview.apps.protocol import build_recognizer, stack_gallery, wrap_degrees
+    from torch_eigview.evaluation.scoring import build_recognizer, stack_gallery, wrap_degrees
     from torch_eigview.io.checkpoint import save_recognizer
     from torch_eigview.io.preprocessing import Preprocessing
 

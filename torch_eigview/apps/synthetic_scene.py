@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 
 import torch
 
-from torch_eigview.apps.protocol import angle_range
 from torch_eigview.check import check_choice
 from torch_eigview.datasets import (
     CAMERAS,
@@ -32,6 +31,7 @@ from torch_eigview.datasets.backdrop import Backdrop
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.renderer import Render, render_many
 from torch_eigview.datasets.shapes import SyntheticObject, make_object
+from torch_eigview.evaluation.scoring import angle_range
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.synthesis import PairGeometry, SynthesisOptions, pair_geometry, pair_of, synthesize_views
 from torch_eigview.warp.normalize import seed_foreground

@@ -1,7 +1,7 @@
 """The whole method as one estimator: seed views per object in, eigenspace and gallery out.
 
 :class:`FewViewEigenspace` runs the recognition pipeline of the paper's experiments
-(Sec. 4; :mod:`torch_eigview.apps.experiment`) as a library object: per object, the
+(Sec. 4; :mod:`torch_eigview.evaluation.coil`) as a library object: per object, the
 correspondences of its seed views and the views synthesized over a range of angles
 (:func:`~torch_eigview.synthesis.synthesize_views`, Sec. 4.1 sectors for more than two
 seeds); one eigenspace over every object's gallery views, each scaled to unit L2 norm

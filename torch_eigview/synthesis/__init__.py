@@ -24,6 +24,7 @@ view between two seeds, by Eq. 2 over its correspondences with both.
 
 from __future__ import annotations
 
+from torch_eigview.synthesis.circle import check_overlap, synthesize_circle
 from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.synthesis.seed_pairs import (
     MAX_AUTO_ELEVATION,
@@ -43,12 +44,14 @@ __all__ = [
     "PairGeometry",
     "SynthesisOptions",
     "SynthesizedViews",
+    "check_overlap",
     "check_seeds",
     "iter_object_geometries",
     "object_geometries",
     "pair_geometry",
     "pair_of",
     "seed_pair_poses",
+    "synthesize_circle",
     "synthesize_views",
     "view_angles",
 ]

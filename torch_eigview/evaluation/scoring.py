@@ -10,7 +10,7 @@ Every experiment runs the same three steps, whatever made its gallery:
 3. :func:`score`: each object's test views recognized; the accuracy over all of them and
    per object, and the mean absolute pose error of the correctly recognized ones.
 
-The COIL experiment (:mod:`torch_eigview.apps.experiment`) and the synthetic one
+The COIL experiment (:mod:`torch_eigview.evaluation.coil`) and the synthetic one
 (:mod:`torch_eigview.apps.demo`) differ only in their galleries and test views.
 """
 
@@ -181,7 +181,7 @@ def score(
         pose_fn: ``(views (T, C, H, W), labels (T,), poses (T,)) → poses (T,)`` that
             replaces the recognizer's poses (the start it is given) of the correctly
             recognized views, the only ones scored; e.g.
-            :class:`~torch_eigview.apps.seed_pose.SeedPoses`.
+            :class:`~torch_eigview.evaluation.seed_pose.SeedPoses`.
         workers: threads that run ``pose_fn``, one object each at a time, while this
             thread recognizes the next objects (0: all in this thread). Each runs torch
             under the caller's intra-op threads: use them under

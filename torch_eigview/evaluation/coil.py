@@ -18,7 +18,7 @@ views per object for two seeds at 1° steps, 41 + α for three), as the paper's 
 experiment grows it with 2α.
 
 With ``seeds`` = M the experiment goes round the whole turntable instead
-(:mod:`torch_eigview.apps.circle`): M seed views 360°/M apart from ``center``, every
+(:mod:`torch_eigview.evaluation.circle`): M seed views 360°/M apart from ``center``, every
 sector synthesized (every ``synth`` step), one eigenspace, and every available pose that
 holds no real gallery view tested; ``sparse`` is the M seeds alone and ``dense`` the real
 views every ``dense_step`` degrees.
@@ -34,16 +34,6 @@ from typing import Any
 
 import torch
 
-from torch_eigview.apps.circle import (
-    CircleLayout,
-    check_overlap,
-    circle_layout,
-    grid_step,
-)
-from torch_eigview.apps.coil_result import CoilResult
-from torch_eigview.apps.object_synthesis import object_galleries
-from torch_eigview.apps.protocol import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
-from torch_eigview.apps.seed_pose import SeedPoses
 from torch_eigview.check import (
     VIEW_LIMIT,
     check_alpha,
@@ -55,9 +45,14 @@ from torch_eigview.check import (
 )
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
+from torch_eigview.evaluation.circle import CircleLayout, circle_layout, grid_step
+from torch_eigview.evaluation.coil_result import CoilResult
+from torch_eigview.evaluation.scoring import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
+from torch_eigview.evaluation.seed_pose import SeedPoses
 from torch_eigview.geometry.angles import wrap_angle
+from torch_eigview.scale.galleries import object_galleries
 from torch_eigview.scale.parallel import KINDS, group_size
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews
+from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_overlap
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
@@ -107,10 +102,10 @@ class CoilExperiment:
             (:meth:`~torch_eigview.nn.recognition.NearestNeighborRecognizer.interpolate_poses`),
             not the nearest view's pose.
         three_view_pose: then measure each pose by geometry from the pose above, against
-            the recognized object's seeds (:class:`~torch_eigview.apps.seed_pose.SeedPoses`,
+            the recognized object's seeds (:class:`~torch_eigview.evaluation.seed_pose.SeedPoses`,
             about 0.13 s a view over two worker threads); not with ``seeds=2`` (Eq. 2 is singular).
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
-            (:func:`~torch_eigview.apps.circle.synthesize_circle`), 0 for none.
+            (:func:`~torch_eigview.evaluation.circle.synthesize_circle`), 0 for none.
         workers: workers that synthesize the ``nvs`` galleries, a few objects each at a
             time, their flows batched (:func:`~torch_eigview.scale.parallel.group_size`),
             and as threads measure the geometric poses (``three_view_pose``)
@@ -238,7 +233,7 @@ class CoilExperiment:
         ``names`` name ``seeds`` and ``dense_step`` in errors.
 
         Raises:
-            ValueError: see :func:`~torch_eigview.apps.circle.circle_layout`.
+            ValueError: see :func:`~torch_eigview.evaluation.circle.circle_layout`.
         """
         if self.seeds is None:
             raise ValueError("circle() needs seeds (the full circle's number of seed views), got None")

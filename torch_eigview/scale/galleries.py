@@ -1,6 +1,6 @@
 """One object's synthesized gallery as a job for a worker thread or process (or this one).
 
-:class:`~torch_eigview.apps.experiment.CoilExperiment` hands each object's seeds to
+:class:`~torch_eigview.evaluation.coil.CoilExperiment` hands each object's seeds to
 :func:`synthesize_object` through :func:`object_galleries`, a few objects to a pool job
 (:func:`synthesize_group`: their flows batched). A
 worker's warnings would be lost and its errors would name no object, so the job returns
@@ -16,7 +16,6 @@ from typing import Any
 
 import torch
 
-from torch_eigview.apps.circle import synthesize_circle
 from torch_eigview.scale.job_warnings import job_warnings
 from torch_eigview.scale.parallel import each_or_alone, grouped, map_ordered, own_views
 from torch_eigview.synthesis import (
@@ -25,6 +24,7 @@ from torch_eigview.synthesis import (
     SynthesisOptions,
     SynthesizedViews,
     iter_object_geometries,
+    synthesize_circle,
     synthesize_views,
 )
 
@@ -46,7 +46,7 @@ def synthesize_object(
 ) -> tuple[SynthesizedViews, list[CaughtWarning]] | ValueError:
     """One object's ``nvs`` gallery, in this process, a pool thread or a worker process: the views at ``thetas``
     from seeds α apart, or with ``thetas`` None the full circle every ``step`` degrees
-    (:func:`~torch_eigview.apps.circle.synthesize_circle`).
+    (:func:`~torch_eigview.evaluation.circle.synthesize_circle`).
 
     Args:
         records: the seed pairs' geometry of a group's objects (:func:`_group_records`),

@@ -1,4 +1,4 @@
-"""The outcome of one COIL experiment (:class:`~torch_eigview.apps.experiment.CoilExperiment`)
+"""The outcome of one COIL experiment (:class:`~torch_eigview.evaluation.coil.CoilExperiment`)
 and its JSON record."""
 
 from __future__ import annotations

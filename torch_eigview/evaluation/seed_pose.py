@@ -17,7 +17,7 @@ __all__ = ["SeedPoses"]
 
 @dataclass(frozen=True)
 class SeedPoses:
-    """``(views, labels, rough poses) → poses``, :func:`~torch_eigview.apps.protocol.score`'s
+    """``(views, labels, rough poses) → poses``, :func:`~torch_eigview.evaluation.scoring.score`'s
     ``pose_fn``: every view against the seed views of the object it is labelled as.
 
     Attributes:
