@@ -1,6 +1,6 @@
-"""Seed-pair geometry of many objects: the row matcher's flows batched over objects in calls
-sized by their cost volumes, the records those of each object alone bit for bit, and each
-object's elevation fit (and its warnings) when its records are taken."""
+"""Seed-pair geometry of many objects: the row matcher's flows batched over objects, the
+records those of each object alone bit for bit whatever the batch, and each object's
+elevation fit (and its warnings) when its records are taken."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import math
 import pytest
 import torch
 
+import torch_eigview._tuning as _tuning
 import torch_eigview.synthesis.seed_pairs as seed_pairs
-from torch_eigview.apps.bench_scaling import smooth_views
 from torch_eigview.geometry.row_matcher import volume_size
 from torch_eigview.synthesis import (
     ElevationFallbackWarning,
@@ -20,6 +20,8 @@ from torch_eigview.synthesis import (
     object_geometries,
     pair_geometry,
 )
+
+from tests.helpers import smooth_views
 
 
 def _objects(n: int, size: int = 32) -> list[torch.Tensor]:
@@ -35,12 +37,13 @@ def _same(a: seed_pairs.PairGeometry, b: seed_pairs.PairGeometry) -> bool:
 
 
 @pytest.mark.parametrize("flow", ["guided", "rows"])
-@pytest.mark.parametrize("budget", [1, 3 * volume_size(32, 32, 5.0), 1 << 22])
+@pytest.mark.parametrize("budget", [1, 6 * volume_size(32, 32, 5.0), None])
 def test_batched_flows_equal_each_object_alone(
-    monkeypatch: pytest.MonkeyPatch, flow: str, budget: int
+    monkeypatch: pytest.MonkeyPatch, flow: str, budget: int | None
 ) -> None:
-    """One pair a call, a few pairs a call or every pair in one: each object's records are
-    its own pair_geometry's, bit for bit, and the calls are as many as the budget says."""
+    """One pair a call (a tiny batch budget), a few pairs a call, or the default budget
+    (all five pairs of these small views in one call): each object's records are its own
+    pair_geometry's, bit for bit."""
     objects = _objects(5)
     opts = SynthesisOptions(flow=flow)
     alone = [pair_geometry(s, 5.0, opts) for s in objects]
@@ -51,32 +54,38 @@ def test_batched_flows_equal_each_object_alone(
         calls.append(view1.shape[0])
         return estimate(view1, *args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(seed_pairs, "FLOW_BATCH_CPU", budget)
+    if budget is not None:
+        monkeypatch.setattr(_tuning, "FLOW_BATCH_CPU", budget)
     monkeypatch.setattr(seed_pairs, "estimate_correspondence", counted)
     batched = object_geometries(objects, 5.0, opts)
-    per_call = max(1, budget // (2 * volume_size(32, 32, 5.0)))
-    assert calls == [min(per_call, 5 - i) for i in range(0, 5, per_call)]
+    # The batching took effect: one pair a call, a few (3 + 2), or all five in one.
+    assert calls == {1: [1] * 5, None: [5]}.get(budget, [3, 2])
     for got, want in zip(batched, alone, strict=True):
         assert len(got) == 1 and _same(got[0], want[0])
 
 
-def test_pairs_per_call_follows_the_cost_volume() -> None:
-    """On the CPU the row matcher's calls take the pairs whose volumes (both directions) fit
-    in FLOW_BATCH_CPU; the guided flow's prior runs at most at 128 × 128; elsewhere and
-    for TV-L1 every pair goes in one call."""
-    seeds = torch.zeros(2, 1, 128, 128)
-    guided = SynthesisOptions()
-    assert seed_pairs._pairs_per_call(seeds, 10.0, guided) == 5  # 25 labels
-    assert seed_pairs._pairs_per_call(seeds, 5.0, guided) == 9  # 13 labels
-    assert seed_pairs._pairs_per_call(seeds, 45.0, guided) == 1  # 93 labels
-    big = torch.zeros(2, 1, 512, 512)  # the prior at 128 × 128
-    assert seed_pairs._pairs_per_call(big, 10.0, guided) == 5
-    assert seed_pairs._pairs_per_call(big, 10.0, SynthesisOptions(flow="rows")) == 1
-    deep = SynthesisOptions(flow_options={"depth": 16.0})  # 2 · ceil(16 sin 10°) + 1 = 7 labels
-    assert seed_pairs._pairs_per_call(seeds, 10.0, deep) == seed_pairs.FLOW_BATCH_CPU // (2 * 7 * 128 * 128)
-    assert seed_pairs._pairs_per_call(seeds, 10.0, SynthesisOptions(flow="tvl1")) is None
-    assert seed_pairs._pairs_per_call(seeds.to("meta"), 10.0, guided) is None
+@pytest.mark.parametrize("budget", [1, None])
+def test_guided_flow_with_a_reduced_prior_batches_the_same(
+    monkeypatch: pytest.MonkeyPatch, budget: int | None
+) -> None:
+    """Views larger than the guided flow's ``prior_side`` have their prior matched at a
+    reduced size; batched over objects, one pair a call or all in one, the records are
+    still each object's own."""
+    objects = _objects(3, size=48)
+    opts = SynthesisOptions(flow_options={"prior_side": 24, "num_warp": 3, "num_iter": 5})
+    alone = [pair_geometry(s, 5.0, opts) for s in objects]
+    if budget is not None:
+        monkeypatch.setattr(_tuning, "FLOW_BATCH_CPU", budget)
+    batched = object_geometries(objects, 5.0, opts)
+    for got, want in zip(batched, alone, strict=True):
+        assert len(got) == 1 and _same(got[0], want[0])
+    full = pair_geometry(objects[0], 5.0, SynthesisOptions())  # the prior at full size
+    assert not torch.equal(full[0].correspondence.disparity_12, alone[0][0].correspondence.disparity_12)
+
+
+def test_volume_size_counts_labels_times_pixels() -> None:
     assert volume_size(128, 128, 10.0) == (2 * math.ceil(64 * math.sin(math.radians(10))) + 1) * 128 * 128
+    assert volume_size(128, 128, 10.0, depth=16.0) == 7 * 128 * 128  # 2 · ceil(16 sin 10°) + 1 labels
 
 
 def test_iter_checks_at_the_call_and_warns_per_object(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -241,3 +241,60 @@ def test_on_course_reads_no_rate_from_an_overflow() -> None:
     assert not subspace._on_course([4.0, 5.0, math.nan], 3, 10)
     assert subspace._on_course([100.0, 10.0, 1.5], 3, 10)  # rate 0.12: one more step
     assert not subspace._on_course([100.0, 90.0, 81.0], 3, 10)  # rate 0.9: about 42 more
+
+
+def test_oversample_auto_is_each_methods_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``oversample="auto"`` is SUBSPACE_OVERSAMPLE (35) for the subspace iteration and
+    RANDOMIZED_OVERSAMPLE (10) for the range finder: the same fits bit for bit as those
+    values given; another width gives another block (the same eigenspace to tolerance)."""
+    from torch_eigview.decomposition.linalg import RANDOMIZED_OVERSAMPLE
+    from torch_eigview.decomposition.subspace import SUBSPACE_OVERSAMPLE
+
+    _spy(monkeypatch)
+    x = make_views(300, 500)
+    auto = Eigenspace(8, solver="subspace").fit(x)
+    given = Eigenspace(8, solver="subspace", oversample=SUBSPACE_OVERSAMPLE).fit(x)
+    narrow = Eigenspace(8, solver="subspace", oversample=4).fit(x)
+    assert torch.equal(auto.components_, given.components_)
+    assert not torch.equal(auto.components_, narrow.components_)
+    assert _largest_angle(auto.components_, narrow.components_) < 1e-8
+    blocks = list(x.split(41))
+    for method, width in (("subspace", SUBSPACE_OVERSAMPLE), ("randomized", RANDOMIZED_OVERSAMPLE)):
+        a = StreamingEigenspace(8, method=method).fit(blocks)
+        b = StreamingEigenspace(8, method=method, oversample=width).fit(blocks)
+        assert torch.equal(a.components_, b.components_), method
+    assert repr(Eigenspace(8, oversample=4)) == "Eigenspace(n_components=8, solver='auto', oversample=4)"
+
+
+@pytest.mark.parametrize(
+    ("value", "error", "match"),
+    [
+        ("wide", ValueError, r"oversample='wide' must be 'auto' or an int >= 0"),
+        (-1, ValueError, r"oversample=-1 must be >= 0"),
+        (2.5, TypeError, r"oversample must be 'auto' or an int >= 0, got float 2.5"),
+        (True, TypeError, r"oversample must be 'auto' or an int >= 0, got bool"),
+    ],
+)
+def test_oversample_errors(value: object, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        Eigenspace(5, oversample=value)  # type: ignore[arg-type]
+    with pytest.raises(error, match=match):
+        StreamingEigenspace(5, oversample=value)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("method", ["exact", "subspace"])
+def test_streamed_chunks_do_not_change_the_fit(monkeypatch: pytest.MonkeyPatch, method: str) -> None:
+    """Blocks gathered into chunks of the default size or one block a chunk: the same
+    eigenspace (the Gram entries are the same dot products; the subspace iteration's sums
+    over chunks agree to rounding)."""
+    import torch_eigview._tuning as _tuning
+
+    _spy(monkeypatch)
+    x = make_views(410, 500)
+    blocks = list(x.split(41))
+    want = StreamingEigenspace(8, method=method, max_views=100).fit(blocks)
+    monkeypatch.setattr(_tuning, "CHUNK_VIEWS", 1)
+    got = StreamingEigenspace(8, method=method, max_views=100).fit(blocks)
+    assert got.method_ == want.method_ == method
+    torch.testing.assert_close(got.components_, want.components_, atol=1e-10, rtol=0)
+    torch.testing.assert_close(got.eigenvalues_, want.eigenvalues_, atol=0, rtol=1e-12)

@@ -15,7 +15,7 @@ from torch_eigview.datasets.renderer import render_views
 from torch_eigview.datasets.shapes import SHAPES, make_object
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
-from torch_eigview.geometry.guided_flow import MIN_SIDE, guided_tvl1
+from torch_eigview.geometry.guided_flow import MIN_SIDE, guided_tvl1, prior_reduction
 from torch_eigview.synthesis import SynthesisOptions, object_geometries, pair_geometry, synthesize_views
 
 SIZE = 48
@@ -156,17 +156,15 @@ def test_empty_batch_3d_views_and_gradients() -> None:
     assert seeds.grad is not None and float(seeds.grad.abs().sum()) > 0
 
 
-def test_large_views_take_the_prior_at_a_reduced_size(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A view larger than PRIOR_SIDE has its prior matched on a view reduced by a power of
-    two and scaled back; TV-L1 takes up the difference (here PRIOR_SIDE is lowered to 24 on
-    the 48-pixel views, a reduction by 2)."""
-    import torch_eigview.geometry.guided_flow as guided_flow
-
+def test_large_views_take_the_prior_at_a_reduced_size() -> None:
+    """A view larger than ``prior_side`` has its prior matched on a view reduced by a power
+    of two and scaled back; TV-L1 takes up the difference (here ``prior_side=24`` on the
+    48-pixel views, a reduction by 2)."""
     views, seen, exact = _pair("head", 45.0)
     inner = _interior(seen)
     full = guided_tvl1(views[:1], views[1:], 45.0, **FAST)
-    monkeypatch.setattr(guided_flow, "PRIOR_SIDE", 24)
-    reduced = guided_tvl1(views[:1], views[1:], 45.0, **FAST)
+    assert prior_reduction(48, 48) == 1 and prior_reduction(48, 48, 24) == 2
+    reduced = guided_tvl1(views[:1], views[1:], 45.0, prior_side=24, **FAST)
     err_full, err_reduced = _median_error(full, exact, inner), _median_error(reduced, exact, inner)
     assert err_reduced < 1.0 and err_reduced < 2 * err_full + 0.2, (err_reduced, err_full)
     assert not torch.equal(full.disparity_12, reduced.disparity_12)
@@ -184,6 +182,8 @@ def test_large_views_take_the_prior_at_a_reduced_size(monkeypatch: pytest.Monkey
         (lambda v: guided_tvl1(v[..., :3, :3], v[..., :3, :3], 180.0), ValueError, r"alpha=180"),
         (lambda v: guided_tvl1(v, v, 10.0, num_warp=0), ValueError, r"num_warp"),
         (lambda v: guided_tvl1(v, v, 10.0, patch=4), ValueError, r"patch=4 must be odd"),
+        (lambda v: guided_tvl1(v, v, 10.0, prior_side=0), ValueError, r"prior_side=0 must be >= 1"),
+        (lambda v: guided_tvl1(v, v, 10.0, prior_side=64.0), TypeError, r"prior_side must be an integer"),
         (lambda v: estimate_correspondence(v, v, method="guided"), ValueError, r"pass alpha"),
         (lambda v: guided_tvl1(v[..., :3, :3], v[..., :3, :3], 10.0, depth=-1.0), ValueError, r"depth=-1.0"),
         (lambda v: guided_tvl1(v[..., :3, :3], v[..., :3, :3], 10.0, center="a"), TypeError, r"center"),
@@ -204,6 +204,8 @@ def test_large_views_take_the_prior_at_a_reduced_size(monkeypatch: pytest.Monkey
         "alpha-180-small",
         "tvl1-option",
         "row-option",
+        "prior-side-0",
+        "prior-side-float",
         "no-alpha",
         "row-option-small",
         "center-small",

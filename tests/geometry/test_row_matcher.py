@@ -180,14 +180,14 @@ def test_empty_batch_and_views_that_require_grad() -> None:
 @pytest.mark.parametrize("chunk", [1, 40_000, 1 << 30])
 def test_cost_volume_in_label_chunks_is_the_same(monkeypatch: pytest.MonkeyPatch, chunk: int) -> None:
     """The cost volume is computed a few labels at a time (in cache on the CPU): one label
-    per chunk, a few, or all at once give the same matches bit for bit, with the elevation
-    searched (the line model's quarter-resolution volume is chunked too)."""
-    from torch_eigview.geometry import row_matcher
+    per chunk, a few, or all at once give the same matches bit for bit as the default
+    slicing, with the elevation searched (the line model's quarter-resolution volume is
+    chunked too)."""
+    import torch_eigview._tuning as _tuning
 
     views, _ = _pair("head", 30.0)
-    monkeypatch.setattr(row_matcher, "_CHUNK_CPU", 1 << 19)
     reference = match_rows(views[:1], views[1:], 30.0)
-    monkeypatch.setattr(row_matcher, "_CHUNK_CPU", chunk)
+    monkeypatch.setattr(_tuning, "COST_CHUNK_CPU", chunk)
     chunked = match_rows(views[:1], views[1:], 30.0)
     for name in ("disparity_12", "disparity_21", "vertical_12", "vertical_21", "valid_12", "valid_21"):
         assert torch.equal(getattr(chunked, name), getattr(reference, name)), name

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
+import torch_eigview._tuning as _tuning
 from torch_eigview.scale import default_threads, thread_policy, threads
 from torch_eigview.synthesis import synthesize_views
 
@@ -96,7 +97,7 @@ def test_idle_cpus_without_kernel_counters_counts_every_cpu(tmp_path: Path) -> N
 
 def test_for_products_only_inside_the_policy_and_for_large_products(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(thread_policy, "product_threads", lambda: 2)
-    big = thread_policy.PRODUCT_FLOPS
+    big = _tuning.PRODUCT_FLOPS
     with threads(), thread_policy.for_products(big) as n:  # the policy: the idle CPUs
         assert n == 2 == torch.get_num_threads()
     with threads(1), thread_policy.for_products(big) as n:  # --threads 1: left as it is

@@ -183,15 +183,38 @@ def test_fill_row_holes_object_rows_equal_former_bit_for_bit(dtype: torch.dtype)
     assert torch.equal(fill_row_holes(src, hit, fallback), _old_fill_row_holes(src, hit, fallback))
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("size", [(12, 17), (128, 128), (1, 9)])
 @pytest.mark.parametrize("tilt_deg", [0.0, 14.0])
 @pytest.mark.parametrize("shared", [True, False])
-def test_apply_maps_equals_kornia_remap_bit_for_bit(tilt_deg: float, shared: bool) -> None:
-    b, h, w = 2, 12, 17
-    corr = _corr(b, h, w, 1, torch.float32)
+def test_apply_maps_equals_kornia_remap_bit_for_bit(
+    tilt_deg: float, shared: bool, size: tuple[int, int], dtype: torch.dtype
+) -> None:
+    """The view sampler (grid_sample on coordinates normalized by the copy of kornia's
+    rule) gives kornia's remap's samples bit for bit, a single row included."""
+    b, (h, w) = 2, size
+    corr = _corr(b, h, w, 1, dtype)
     thetas = [-8.0, 0.0, 4.0, 11.0] if shared else torch.tensor([[-8.0, 3.0], [5.0, 12.0]])
     maps = NovelViewWarp(10.0, elevation=tilt_deg).maps(corr, thetas)
-    views = torch.rand(2, b, 3, h, w, generator=torch.Generator().manual_seed(2))
+    views = torch.rand(2, b, 3, h, w, generator=torch.Generator().manual_seed(2), dtype=dtype)
     assert torch.equal(NovelViewWarp.apply_maps(maps, views), _old_apply_maps(maps, views))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_kornia_scale_is_kornias_normalization_bit_for_bit(dtype: torch.dtype) -> None:
+    """The sampler's copy of kornia's pixel normalization gives what
+    ``kornia.geometry.conversions.normalize_pixel_coordinates`` gives, on every axis length
+    up to 4,096 and a single pixel, at coordinates inside and outside the image."""
+    from kornia.geometry.conversions import normalize_pixel_coordinates
+
+    from torch_eigview.warp.base import kornia_scale
+
+    gen = torch.Generator().manual_seed(4)
+    for n in [*range(1, 300), 511, 512, 1023, 1024, 2047, 2048, 4095, 4096]:
+        x = (torch.rand(64, generator=gen, dtype=torch.float64) * (n + 4) - 2).to(dtype)
+        factor, offset = kornia_scale(n, x)
+        want = normalize_pixel_coordinates(torch.stack([x, x], dim=-1), n, n)
+        assert torch.equal(x * factor - offset, want[:, 0]), n
 
 
 def _both_refinements(seed: int, thetas: list[float], second: bool) -> tuple[tuple, tuple]:

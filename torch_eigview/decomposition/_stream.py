@@ -33,13 +33,13 @@ def _digest(b: torch.Tensor) -> torch.Tensor:
 
     One product with an (N, 2) weight matrix in the block's dtype: no temporary the size of
     the block. (A float64 row sum converts the whole block first; freeing such a block-sized
-    temporary on every pass raised glibc's mmap threshold, and the view blocks of a
-    ``ViewCache`` then fragmented the heap: the COIL-100-sized build's peak grew 2.8x.)
+    temporary on every pass makes glibc raise its mmap threshold, after which the view
+    blocks of a ``ViewCache`` fragment the heap and a large build's peak memory grows.)
     Both passes compute the same product on the same data, so their digests agree exactly
-    for an unchanged source. The weights are the transpose of a (2, N) matrix: with an
-    (N, 2) one the CPU's GEMM took 4.4x as long (1.44 against 0.33 ms for a block of 41
-    views of 3 × 128 × 128, two threads), and the COIL-100-sized exact fit digests 605
-    such blocks.
+    for an unchanged source. The weights are a (2, N) matrix used transposed, so that
+    each weight vector lies contiguous in memory, as the block's rows do: a contiguous
+    (N, 2) matrix would be read with a stride of 2 along N, the long axis of the product,
+    which every block of every pass pays.
     """
     n = b.shape[1]
     ones = torch.ones(n, dtype=b.dtype, device=b.device)

@@ -12,8 +12,15 @@ import torch
 
 from torch_eigview.check import check_choice, check_finite, check_image_shape, check_int, check_magnitude
 from torch_eigview.decomposition._fitted import DTYPES, FittedEigenspace, views_to_fit
-from torch_eigview.decomposition.linalg import EigenFit, centred_k, gram, leading_eigenpairs
-from torch_eigview.decomposition.subspace import OVERSAMPLE, leading_by_subspace
+from torch_eigview.decomposition.linalg import (
+    EigenFit,
+    centred_k,
+    check_oversample,
+    gram,
+    leading_eigenpairs,
+    oversample_for,
+)
+from torch_eigview.decomposition.subspace import SUBSPACE_OVERSAMPLE, leading_by_subspace
 
 __all__ = ["SUBSPACE_MIN", "Eigenspace", "exact_solver", "pick_solver"]
 
@@ -23,9 +30,9 @@ _SOLVERS = ("auto", "gram", "covariance", "svd", "subspace")
 #: matrix by panels costs about 1.25·P²·N flops against 4·P·N·l per iteration (l = k + 35
 #: = 50 at k = 15), so at this size the iteration's budget, half the exact cost, is about
 #: 12 iterations, and an iteration stopped at its third (a spectrum without a gap) adds
-#: about an eighth to the exact time. Chosen from two measurements (2026-12-02): COIL-20
-#: galleries converge in 6–7 iterations (the M = 8 gallery, 7,200 × 16,384: 6, in 1.8–2.6 s
-#: against 9.4–11.2 s), while 100 random smooth textures (4,100 × 49,152) would need about
+#: about an eighth to the exact cost. Below it the budget shrinks with P (about 6
+#: iterations at P = 2,048 when N > P), too few for a turntable gallery to converge in: COIL-20 galleries converge in 6 to 7 iterations (the full-circle gallery,
+#: 7,200 × 16,384: 6), while 100 random smooth textures (4,100 × 49,152) would need about
 #: 20 and are stopped at the third.
 SUBSPACE_MIN = 4096
 
@@ -36,10 +43,17 @@ def exact_solver(n_views: int, n_features: int) -> str:
 
 
 def pick_solver(
-    n_components: int | float, solver: str, n_views: int, n_features: int, name: str = "solver"
+    n_components: int | float,
+    solver: str,
+    n_views: int,
+    n_features: int,
+    name: str = "solver",
+    oversample: int = SUBSPACE_OVERSAMPLE,
 ) -> str:
     """The solver that runs for P × N views: ``solver``, or the one "auto" picks; ``name``
-    is the argument that chose it, for the message.
+    is the argument that chose it, for the message. "auto" picks "subspace" for an int
+    k when P and N are both at least :data:`SUBSPACE_MIN` and the block of k +
+    ``oversample`` vectors fits in both, else :func:`exact_solver`'s.
 
     Raises:
         ValueError: "subspace" with a fractional ``n_components``.
@@ -49,7 +63,7 @@ def pick_solver(
     if solver != "auto":
         return solver
     small = min(n_views, n_features)
-    if isinstance(n_components, int) and small >= SUBSPACE_MIN and n_components + OVERSAMPLE <= small:
+    if isinstance(n_components, int) and small >= SUBSPACE_MIN and n_components + oversample <= small:
         return "subspace"
     return exact_solver(n_views, n_features)
 
@@ -103,17 +117,25 @@ class Eigenspace(FittedEigenspace):
             the smallest k with sum_{i<=k} λ_i / sum_i λ_i >= fraction (the paper uses 0.99).
         solver: "gram" eigen-decomposes the P×P Gram matrix Xc Xcᵀ and maps its eigenvectors
             V to components (Xcᵀ V) / sqrt(λ); "covariance" the N×N matrix Xcᵀ Xc; "svd" runs
-            ``torch.linalg.svd`` on Xc; "subspace" iterates a block of k + 35 vectors
-            (:func:`~torch_eigview.decomposition.subspace.subspace_eigenpairs`, an int
-            ``n_components`` only) until the k leading eigenpairs converge, falling back
-            to "gram" / "covariance" where they do not within the products those cost;
-            "auto" picks "subspace" for an int ``n_components`` when P and N are both at
-            least :data:`SUBSPACE_MIN` (4096), else "gram" when N > P, else "covariance".
+            ``torch.linalg.svd`` on Xc; "subspace" iterates a block of k + ``oversample``
+            vectors (:func:`~torch_eigview.decomposition.subspace.subspace_eigenpairs`, an
+            int ``n_components`` only) until the k leading eigenpairs converge, falling
+            back to "gram" / "covariance" where they do not within half the products those
+            cost; "auto" picks "subspace" for an int ``n_components`` when P and N are both
+            at least :data:`SUBSPACE_MIN` (4096: below it the iterations the budget allows
+            are too few for a turntable gallery) and the block fits in both, else "gram"
+            when N > P, else "covariance" (the smaller of the two products).
+        oversample: the vectors beyond k in the "subspace" solver's block, an int >= 0
+            (at least 1 for the iteration to run; 0 leaves it to the exact path), or
+            "auto": :data:`~torch_eigview.decomposition.subspace.SUBSPACE_OVERSAMPLE`
+            (35). A wider block converges in fewer iterations, each reading the views
+            twice. The other solvers do not use it.
 
     Raises:
-        TypeError: ``n_components`` is not a number (bool included) or ``solver`` not a str.
-        ValueError: ``n_components`` or ``solver`` is out of range; at fit, "subspace"
-            with a fractional ``n_components``.
+        TypeError: ``n_components`` is not a number (bool included), ``solver`` not a str
+            or ``oversample`` neither "auto" nor an int.
+        ValueError: ``n_components``, ``solver`` or ``oversample`` is out of range; at fit,
+            "subspace" with a fractional ``n_components``.
 
     Example:
         >>> X = torch.randn(20, 64, dtype=torch.float64)
@@ -123,13 +145,18 @@ class Eigenspace(FittedEigenspace):
 
     _FIT_CALLS = "fit or fit_sparse"
 
-    def __init__(self, n_components: int | float = 15, *, solver: str = "auto") -> None:
+    def __init__(
+        self, n_components: int | float = 15, *, solver: str = "auto", oversample: int | str = "auto"
+    ) -> None:
         super().__init__(n_components)
         self.solver = check_choice(solver, "solver", _SOLVERS)
+        self.oversample = check_oversample(oversample)
         self.solver_: str | None = None  # None until a fit here (or a fit from elsewhere)
 
     def __repr__(self) -> str:
-        return f"Eigenspace(n_components={self.n_components!r}, solver={self.solver!r})"
+        # scikit-learn's way: the parameters always shown, and oversample where it is set.
+        extra = "" if self.oversample == "auto" else f", oversample={self.oversample!r}"
+        return f"Eigenspace(n_components={self.n_components!r}, solver={self.solver!r}{extra})"
 
     def fit(self, X: torch.Tensor) -> Eigenspace:
         """Fits the eigenspace of the views ``X``.
@@ -212,9 +239,10 @@ class Eigenspace(FittedEigenspace):
         dtype = x.dtype
         mean = x.mean(dim=0)
         xc = x - mean
-        solver = pick_solver(self.n_components, self.solver, n_views, n_features)
+        oversample = oversample_for(self.oversample, "subspace")
+        solver = pick_solver(self.n_components, self.solver, n_views, n_features, oversample=oversample)
         if solver == "subspace":
-            found = self._subspace(xc, mean, name)
+            found = self._subspace(xc, mean, name, oversample)
             if found is not None:
                 eigvals, components, total = found
                 self._state = EigenFit.from_eigenpairs(
@@ -244,11 +272,11 @@ class Eigenspace(FittedEigenspace):
         return xc
 
     def _subspace(
-        self, xc: torch.Tensor, mean: torch.Tensor, name: str
+        self, xc: torch.Tensor, mean: torch.Tensor, name: str, oversample: int
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
         """Eigenvalues (k,), components (k, N) and trace of the centred (P, N) views ``xc``
-        by subspace iteration, or None where it did not converge (or k + oversample exceeds
-        P or N): the exact path takes over."""
+        by subspace iteration with k + ``oversample`` vectors, or None where it did not
+        converge (or there is no room for a vector beyond k): the exact path takes over."""
         n_views, n_features = xc.shape
         k = self.n_components
         assert isinstance(k, int), "pick_solver admits subspace for an int k only"
@@ -257,7 +285,7 @@ class Eigenspace(FittedEigenspace):
             w = xc @ v
             return w, xc.T @ w
 
-        found = leading_by_subspace(products, k, n_views, n_features, xc.dtype, xc.device)
+        found = leading_by_subspace(products, k, n_views, n_features, xc.dtype, xc.device, oversample)
         if found is None:
             return None
         eigvals, components = found

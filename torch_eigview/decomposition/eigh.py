@@ -21,9 +21,10 @@ _BLAS_CONTROLLER: list[object] = []  # a cached threadpoolctl.ThreadpoolControll
 def single_threaded_blas() -> contextlib.AbstractContextManager[object]:
     """SciPy's BLAS (OpenBLAS) limited to one thread, when threadpoolctl is installed.
 
-    Between torch's thread pool (busy right before and after, GEMMs) and OpenBLAS's own,
-    two pools contend for the cores: on 2 cores the COIL-20 fit spends ~40 ms more in the
-    eigh and the components product than with OpenBLAS on one thread (spinning workers).
+    Torch's thread pool runs the GEMMs right before and after the eigensolver, and
+    OpenBLAS keeps a pool of its own: with both sized to the cores, the two pools' workers
+    spin for the same cores while the other pool's work runs. A moderate matrix (the
+    caller's choice, n <= 2048) gains little from OpenBLAS threads, so it runs with one.
     """
     if not _BLAS_CONTROLLER:
         try:
@@ -41,20 +42,31 @@ def single_threaded_blas() -> contextlib.AbstractContextManager[object]:
     return limited
 
 
-def eigh_descending(matrix: torch.Tensor, top: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def eigh_descending(
+    matrix: torch.Tensor, top: int | None = None, *, lanczos_steps: int | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Eigenpairs of a symmetric float64 (n, n) matrix by decreasing eigenvalue.
 
-    For a few leading pairs of a large matrix on the CPU: Lanczos with full
+    For a few leading pairs of a large matrix on the CPU (``top`` given, n >= 256 and
+    ``top`` <= n / 4, where computing all n pairs would be mostly waste): Lanczos with full
     reorthogonalization in torch (:func:`_leading_by_lanczos`) until every leading pair's
-    residual is at the level of rounding; on COIL-20's Gram (n = 820, k = 15) 48 steps,
-    about 0.015 s on one thread, eigenvalues equal to LAPACK's to 5e-16 of the largest,
-    and SciPy is not imported (its first import cost a command about 0.2 s). Where it has
-    not converged within :data:`LANCZOS_STEPS` (a flat spectrum: white noise, a kernel
-    near the identity) or cannot go on, ARPACK's implicitly restarted Lanczos (SciPy's
-    ``eigsh``, ``tol=0``, a fixed pseudo-random start) and, where that does not converge
-    or cannot start (a zero matrix), LAPACK's ``dsyevr`` (MRRR, backward stable) take
-    over. The rank (eigenvalues above a tolerance) is exact from the leading ``top``:
-    when it is below ``top`` the remaining eigenvalues, smaller, are below it too.
+    residual is at the level of rounding. On COIL-20's Gram (n = 820, k = 15) that takes
+    48 steps, 48 products with the matrix, and gives eigenvalues equal to LAPACK's to
+    5e-16 of the largest; SciPy is not imported. Where it has not converged within
+    ``lanczos_steps`` (a flat spectrum: white noise, a kernel near the identity) or cannot
+    go on, ARPACK's implicitly restarted Lanczos (SciPy's ``eigsh``, ``tol=0``, a fixed
+    pseudo-random start) and, where that does not converge or cannot start (a zero
+    matrix), LAPACK's ``dsyevr`` (MRRR, backward stable) take over. Every route ends at
+    the same pairs to rounding. Otherwise all pairs, by ``torch.linalg.eigh``. The rank
+    (eigenvalues above a tolerance) is exact from the leading ``top``: when it is below
+    ``top`` the remaining eigenvalues, smaller, are below it too.
+
+    Args:
+        matrix: (n, n) symmetric float64.
+        top: the number of leading pairs wanted, or None for all.
+        lanczos_steps: the most Lanczos steps before ARPACK takes over; None is
+            :data:`LANCZOS_STEPS` (256). It decides which solver's rounding the pairs
+            carry, not how close they are.
 
     Returns:
         Eigenvalues (t,) descending and eigenvectors (n, t) as columns: t = ``top`` for a
@@ -62,7 +74,8 @@ def eigh_descending(matrix: torch.Tensor, top: int | None = None) -> tuple[torch
     """
     n = matrix.shape[0]
     if top is not None and matrix.device.type == "cpu" and n >= 256 and top <= n // 4:
-        found = _leading_by_lanczos(matrix, top)
+        steps = LANCZOS_STEPS if lanczos_steps is None else lanczos_steps
+        found = _leading_by_lanczos(matrix, top, steps)
         if found is not None:
             return found
         return _leading_by_arpack(matrix, top)
@@ -70,15 +83,22 @@ def eigh_descending(matrix: torch.Tensor, top: int | None = None) -> tuple[torch
     return w.flip(0), v.flip(1)
 
 
-#: The most Lanczos steps before ARPACK takes over (COIL-20's Gram converges in 48).
+#: The most Lanczos steps of :func:`eigh_descending` before ARPACK takes over. A step
+#: costs a product with the matrix (2·n² flops) plus its full reorthogonalization against
+#: the j earlier vectors (8·n·j flops), and the basis holds steps × n values: by step
+#: 256 a step's reorthogonalization costs what its product does at n = 1,024 and more
+#: below, and a spectrum that has not converged by then (COIL-20's Gram takes 48 steps)
+#: is one ARPACK's restarts handle in bounded memory.
 LANCZOS_STEPS = 256
 
 
-def _leading_by_lanczos(matrix: torch.Tensor, top: int) -> tuple[torch.Tensor, torch.Tensor] | None:
+def _leading_by_lanczos(
+    matrix: torch.Tensor, top: int, max_steps: int
+) -> tuple[torch.Tensor, torch.Tensor] | None:
     """The ``top`` largest eigenpairs of a symmetric (n, n) float64 matrix by Lanczos with
-    full reorthogonalization, or None where they have not converged within
-    :data:`LANCZOS_STEPS` steps (or cannot: a zero matrix, an invariant subspace of fewer
-    than ``top`` dimensions).
+    full reorthogonalization, or None where they have not converged within ``max_steps``
+    steps (or cannot: a zero matrix, an invariant subspace of fewer than ``top``
+    dimensions).
 
     From a fixed pseudo-random start, each step multiplies one vector by the matrix and
     orthogonalizes it against every earlier one (twice: the basis stays orthonormal to
@@ -91,7 +111,7 @@ def _leading_by_lanczos(matrix: torch.Tensor, top: int) -> tuple[torch.Tensor, t
     n = matrix.shape[0]
     if not bool(matrix.any()):
         return None
-    limit = min(n, LANCZOS_STEPS)
+    limit = min(n, max_steps)
     tol = max(1e-12, 8 * n * torch.finfo(matrix.dtype).eps)
     gen = torch.Generator().manual_seed(0)
     start = torch.randn(n, generator=gen, dtype=matrix.dtype).to(matrix.device)

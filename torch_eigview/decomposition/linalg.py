@@ -3,11 +3,12 @@
 Every eigenspace the package fits (``Eigenspace``, ``StreamingEigenspace``,
 ``KernelEigenspace``, ``torch_eigview.scale.fit_distributed``) goes through these, so they
 agree to the last bit: the Gram product, the float64 eigensolver, the sign rule, the rank
-tolerance, the choice of k, the randomized range finder and the fit record
-:class:`EigenFit`. (Except where ``Eigenspace``'s "auto" takes the subspace solver of
-:mod:`torch_eigview.decomposition.subspace`, for an int k with P and N both at least
-``SUBSPACE_MIN``: that fit agrees with the exact ones to its tolerance, about 2e-6 rad in
-float32.) The names are public for the ``scale`` layer, not re-exported by
+tolerance, the choice of k, the oversampling of the iterative methods, the randomized
+range finder and the fit record :class:`EigenFit`. (Except where ``Eigenspace``'s "auto"
+takes the subspace solver of :mod:`torch_eigview.decomposition.subspace`, for an int k
+with P and N both at least ``SUBSPACE_MIN``: that fit agrees with the exact ones to its
+tolerance, about 2e-6 rad in float32.) The names are public for the ``scale`` layer, not
+re-exported by
 :mod:`torch_eigview.decomposition`; inputs are trusted (callers validate them).
 
 Convention: a data matrix ``X`` is (P, N), one row per view; ``Xc`` is X minus the mean view.
@@ -17,21 +18,27 @@ from __future__ import annotations
 
 import itertools
 import math
+import numbers
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import torch
 
+from torch_eigview.check import check_int
 from torch_eigview.decomposition.eigh import eigh_descending, single_threaded_blas
+from torch_eigview.decomposition.subspace import SUBSPACE_OVERSAMPLE
 
 __all__ = [
+    "RANDOMIZED_OVERSAMPLE",
     "EigenFit",
     "centred_k",
+    "check_oversample",
     "choose_k",
     "eigh_descending",
     "gram",
     "leading_eigenpairs",
     "numerical_rank",
+    "oversample_for",
     "peak_signs",
     "randomized_passes",
     "rank_tolerance",
@@ -39,6 +46,45 @@ __all__ = [
     "sketch_components",
     "sketch_matrix",
 ]
+
+#: Extra random directions of the randomized range finder by default (``oversample="auto"``
+#: with ``method="randomized"``): l = k + 10. Its passes are fixed (3 + ``n_iter``), so
+#: extra directions buy accuracy, not fewer passes, each at a share of every pass's
+#: products; Halko, Martinsson and Tropp (2011, Sec. 4.2) find 5 or 10 adequate, and
+#: scikit-learn's randomized PCA takes 10 (``n_oversamples``).
+RANDOMIZED_OVERSAMPLE = 10
+
+
+def check_oversample(oversample: object) -> int | str:
+    """``oversample`` checked: ``"auto"`` or an int >= 0.
+
+    Raises:
+        TypeError: neither a str nor an integer (bool included).
+        ValueError: another str, or a negative int.
+    """
+    if isinstance(oversample, str):
+        if oversample != "auto":
+            raise ValueError(f"oversample={oversample!r} must be 'auto' or an int >= 0")
+        return oversample
+    if isinstance(oversample, bool) or not isinstance(oversample, numbers.Integral):
+        raise TypeError(
+            f"oversample must be 'auto' or an int >= 0, got {type(oversample).__name__} {oversample!r}"
+        )
+    return check_int(oversample, "oversample", 0)
+
+
+def oversample_for(oversample: int | str, method: str) -> int:
+    """The extra vectors beyond k of ``method``'s block: ``oversample``, or for ``"auto"``
+    :data:`~torch_eigview.decomposition.subspace.SUBSPACE_OVERSAMPLE` (35) for
+    ``"subspace"`` and :data:`RANDOMIZED_OVERSAMPLE` (10) for ``"randomized"``.
+
+    The two methods use their extra vectors differently: the subspace iteration runs until
+    it converges, and a wider block converges in fewer iterations (passes over the data);
+    the range finder makes a fixed number of passes, and a wider sketch is more accurate.
+    """
+    if oversample != "auto":
+        return int(oversample)
+    return SUBSPACE_OVERSAMPLE if method == "subspace" else RANDOMIZED_OVERSAMPLE
 
 
 @dataclass(frozen=True)

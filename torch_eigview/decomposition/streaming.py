@@ -15,22 +15,24 @@ subspace iteration stopped for slow convergence costs more here than in memory):
   gathered into chunks of up to N/2 views (memory N² plus a chunk). Otherwise the P×P
   Gram matrix Xc Xcᵀ is needed, whose cross-block entries need both blocks: each pass
   holds a *panel* of consecutive blocks (at most ``max_views`` views) and multiplies the
-  later blocks against it, gathered into chunks of up to 256 views (fewer when
-  ``max_views`` is smaller; one block at least), so ⌈P / max_views⌉ passes fill the upper
-  block triangle (memory P² plus a panel plus a chunk plus a block). A last pass maps the
-  leading eigenvectors V of the Gram matrix to components
-  Λ^(−1/2) Vᵀ Xc = Σ_b Λ^(−1/2) V_bᵀ (B_b − μ), accumulated into (k, N). The result is
+  later blocks against it, gathered into chunks of a few hundred views
+  (``torch_eigview._tuning.CHUNK_VIEWS``; fewer when ``max_views`` is smaller; one block
+  at least), so ⌈P / max_views⌉ passes fill the upper block triangle (memory P² plus a
+  panel plus a chunk plus a block). A last pass maps the leading eigenvectors V of the
+  Gram matrix to components Λ^(−1/2) Vᵀ Xc = Σ_b Λ^(−1/2) V_bᵀ (B_b − μ), accumulated into
+  (k, N). The result is
   the :class:`~torch_eigview.decomposition.eigenspace.Eigenspace` of the stacked views.
 - ``"randomized"``: a randomized range finder (Halko, Martinsson and Tropp 2011, Alg. 4.4
-  with power iterations) on Xcᵀ: Y = Xcᵀ Ω (N × l, l = k + oversample) is accumulated as
-  Σ_b (B_b − μ)ᵀ Ω_b, each power iteration Y ← Xcᵀ (Xc Q) is one pass (per block
-  Z_b = (B_b − μ) Q, Y += (B_b − μ)ᵀ Z_b), and a last pass forms Z = Xc Q (P × l), whose
+  with power iterations) on Xcᵀ: Y = Xcᵀ Ω (N × l, l = k + oversample, 10 by default) is
+  accumulated as Σ_b (B_b − μ)ᵀ Ω_b, each power iteration Y ← Xcᵀ (Xc Q) is one pass
+  (per block Z_b = (B_b − μ) Q, Y += (B_b − μ)ᵀ Z_b), and a last pass forms Z = Xc Q (P × l), whose
   SVD gives the components. Memory: a block plus N·l plus P·l; 3 + ``n_iter`` passes.
 - ``"subspace"``: after the mean, block subspace iteration until the k leading eigenpairs
   converge (:func:`~torch_eigview.decomposition.subspace.subspace_eigenpairs`, an int k):
   each iteration is one pass, W_b = (B_b − μ) V and Y += (B_b − μ)ᵀ W_b, blocks gathered
-  into chunks of up to 256 views. Memory: a chunk plus N·l plus P·l (l = k + 35). Where it
-  does not converge within what the exact products cost, ``"exact"`` takes over.
+  into chunks as above. Memory: a chunk plus N·l plus P·l (l = k + oversample, 35 by
+  default). Where it does not converge within half what the exact products cost,
+  ``"exact"`` takes over.
 
 ``fit_transform`` projects the views block by block in one pass more. The linear algebra
 is :mod:`torch_eigview.decomposition.linalg`'s, shared with ``Eigenspace``.
@@ -43,6 +45,7 @@ from collections.abc import Callable, Sequence
 
 import torch
 
+import torch_eigview._tuning as _tuning
 from torch_eigview.check import check_int
 from torch_eigview.decomposition._fitted import FittedEigenspace
 from torch_eigview.decomposition._stream import BlockSource, Stream, blocks_of, stream_mean
@@ -50,8 +53,10 @@ from torch_eigview.decomposition.eigenspace import exact_solver, pick_solver
 from torch_eigview.decomposition.linalg import (
     EigenFit,
     centred_k,
+    check_oversample,
     gram,
     leading_eigenpairs,
+    oversample_for,
     randomized_passes,
     sketch_components,
     sketch_matrix,
@@ -62,7 +67,9 @@ __all__ = ["BlockSource", "StreamingEigenspace", "blocks_of"]
 
 _METHODS = ("auto", "exact", "subspace", "randomized")
 _NAME = "the streamed views"  # the fitted views, as the errors name them
-CHUNK_VIEWS = 256  # views per cross-product GEMM of the exact Gram path
+# The chunk size the fits read from _tuning at call time, kept under its old name for
+# the benchmarks' memory model (benchmarks/_fit_case.py imports it from here).
+CHUNK_VIEWS = _tuning.CHUNK_VIEWS
 
 
 class StreamingEigenspace(FittedEigenspace):
@@ -82,7 +89,12 @@ class StreamingEigenspace(FittedEigenspace):
             where ``Eigenspace``'s "auto" takes it, else ``"exact"``) or ``"randomized"``
             (range finder, a fixed number of passes).
         max_views: the most views the exact Gram path holds at once (a panel), >= 1.
-        oversample: extra random directions of the randomized method (l = k + oversample).
+        oversample: the vectors beyond k of the iterative methods' blocks, l = k +
+            ``oversample``: an int >= 0 for both, or "auto", each method's own:
+            :data:`~torch_eigview.decomposition.subspace.SUBSPACE_OVERSAMPLE` (35) for
+            "subspace", whose wider block converges in fewer passes, and
+            :data:`~torch_eigview.decomposition.linalg.RANDOMIZED_OVERSAMPLE` (10) for
+            "randomized", whose passes are fixed and whose extra directions buy accuracy.
         n_iter: power iterations of the randomized method.
         seed: seed of the randomized method's test matrix Ω (P, l), drawn in float64.
 
@@ -100,7 +112,7 @@ class StreamingEigenspace(FittedEigenspace):
         *,
         method: str = "exact",
         max_views: int = 4096,
-        oversample: int = 10,
+        oversample: int | str = "auto",
         n_iter: int = 2,
         seed: int = 0,
     ) -> None:
@@ -109,7 +121,7 @@ class StreamingEigenspace(FittedEigenspace):
             raise ValueError(f"method={method!r} must be one of {_METHODS}")
         self.method = method
         self.max_views = check_int(max_views, "max_views", 1)
-        self.oversample = check_int(oversample, "oversample", 0)
+        self.oversample = check_oversample(oversample)
         self.n_iter = check_int(n_iter, "n_iter", 0)
         # Validated here, not when the randomized method first draws Ω at the end of a pass.
         self.seed = check_int(seed, "seed", -(2**63), 2**64 - 1)
@@ -169,7 +181,10 @@ class StreamingEigenspace(FittedEigenspace):
                 raise ValueError(f"blocks must hold at least 2 views in all, got P={stream.n_views}")
             method = self.method
             if method in ("auto", "subspace"):
-                method = pick_solver(self.n_components, method, stream.n_views, mean64.numel(), "method")
+                oversample = oversample_for(self.oversample, "subspace")
+                method = pick_solver(
+                    self.n_components, method, stream.n_views, mean64.numel(), "method", oversample
+                )
             fit = self._subspace(stream, mean64) if method == "subspace" else None
             if fit is None and method == "randomized":
                 fit = self._randomized(stream, mean64)
@@ -207,8 +222,9 @@ class StreamingEigenspace(FittedEigenspace):
         n = mean.numel()
         scatter = torch.zeros(n, n, dtype=torch.float64, device=mean.device)
         # Blocks are gathered into chunks of up to N/2 views (a quarter of the scatter's bytes):
-        # one 41-view block's product is a whole N×N matrix written and added for a rank-41
-        # update, and 1,000 such are 13x slower than the explicit fit at N = 4096.
+        # each chunk's product writes and adds a whole N×N matrix, so a chunk of one 41-view
+        # block would pay N² memory traffic for a rank-41 update; N/2 views make that traffic
+        # a small share of the chunk's 2·N²·(N/2) flops.
         self._centred_chunks(stream, mean, lambda _, c: scatter.add_(c.T @ c), max(1, n // 2))
         self.n_passes_ = 2
         eigvals, basis, total = self._leading(scatter, stream, mean64)
@@ -223,11 +239,11 @@ class StreamingEigenspace(FittedEigenspace):
         for lo, hi in panels:
             # The panel's blocks are centred straight into one buffer (no list + cat, which
             # would hold the panel twice at its peak); the later blocks are centred into a chunk
-            # of up to CHUNK_VIEWS views (and max_views), multiplied against the panel when full (a
-            # GEMM with the 41 rows of one object runs at 2/3 of the speed of one with 256).
+            # of up to _tuning.CHUNK_VIEWS views (and max_views), multiplied against the panel
+            # when full: a few large GEMMs instead of one thin GEMM per object's block.
             panel = torch.empty(hi - lo, mean.numel(), dtype=mean.dtype, device=mean.device)
             chunks = _Chunks(
-                mean, min(CHUNK_VIEWS, self.max_views), functools.partial(_cross, matrix, panel, lo)
+                mean, min(_tuning.CHUNK_VIEWS, self.max_views), functools.partial(_cross, matrix, panel, lo)
             )
             start = 0
             for b in stream:
@@ -286,7 +302,8 @@ class StreamingEigenspace(FittedEigenspace):
             self.n_passes_ += 1
             return w, y
 
-        found = leading_by_subspace(products, k, p, n, stream.dtype, mean.device)
+        oversample = oversample_for(self.oversample, "subspace")
+        found = leading_by_subspace(products, k, p, n, stream.dtype, mean.device, oversample)
         if found is None:
             return None
         eigvals, components = found
@@ -299,11 +316,11 @@ class StreamingEigenspace(FittedEigenspace):
         stream: Stream,
         mean: torch.Tensor,
         emit: Callable[[int, torch.Tensor], object],
-        rows: int = CHUNK_VIEWS,
+        rows: int | None = None,
     ) -> None:
-        """One pass: every block centred, gathered into chunks of up to ``rows`` views, each
-        handed to ``emit(first view, chunk)``."""
-        chunks = _Chunks(mean, rows, emit)
+        """One pass: every block centred, gathered into chunks of up to ``rows`` views
+        (default ``_tuning.CHUNK_VIEWS``), each handed to ``emit(first view, chunk)``."""
+        chunks = _Chunks(mean, _tuning.CHUNK_VIEWS if rows is None else rows, emit)
         start = 0
         for b in stream:
             chunks.add(start, b)
@@ -314,7 +331,8 @@ class StreamingEigenspace(FittedEigenspace):
     def _randomized(self, stream: Stream, mean64: torch.Tensor) -> EigenFit:
         assert stream.n_views is not None and stream.dtype is not None
         p, n = stream.n_views, mean64.numel()
-        omega = sketch_matrix(self.n_components, self.oversample, p, n, self.seed, mean64.device)
+        oversample = oversample_for(self.oversample, "randomized")
+        omega = sketch_matrix(self.n_components, oversample, p, n, self.seed, mean64.device)
         q, z, total = randomized_passes(stream, mean64, omega, self.n_iter, lambda t: t, row_offset=0)
         stream.check_result(z, "the sketch Xc Q")
         self.n_passes_ = 3 + self.n_iter

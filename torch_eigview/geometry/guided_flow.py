@@ -27,7 +27,7 @@ import inspect
 import torch
 import torch.nn.functional as F
 
-from torch_eigview.check import check_view_pair
+from torch_eigview.check import check_int, check_view_pair
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.row_matcher import check_row_options, epipolar_matches, match_rows
 from torch_eigview.geometry.tvl1 import check_range, diverged, tvl1_flow, warp_by_flow
@@ -38,9 +38,12 @@ __all__ = ["MIN_SIDE", "PRIOR_SIDE", "ROW_OPTIONS", "TVL1_OPTIONS", "guided_tvl1
 #: resolution); on smaller views, whose displacements are a pixel or two, the guided flow is
 #: TV-L1 alone.
 MIN_SIDE = 4
-#: The largest side the row matcher runs at: larger views are reduced by a power of two for
-#: the prior (a 512 × 512 pair at α = 45° on two threads: 0.36 s and 0.36 GB peak for the whole
-#: process, against 31 s and 8.7 GB with the prior at full size).
+#: The default of :func:`guided_tvl1`'s ``prior_side``: the largest side the row matcher's
+#: prior is matched at. The matcher's cost volume holds pixels × labels elements, and its
+#: labels grow with the width (``W/2 · |sin α|`` each way), so its time and memory grow
+#: as the cube of the side: a 512 × 512 pair at full size would cost 64 times a 128 × 128
+#: one. At 128 the prior is matched at COIL's own resolution, and on larger views TV-L1's
+#: deeper pyramid refines what the prior's coarser steps leave.
 PRIOR_SIDE = 128
 
 #: Keyword arguments of :func:`guided_tvl1` that go to the row matcher.
@@ -56,11 +59,11 @@ _ROW_DEFAULTS = {
 TVL1_OPTIONS = tuple(p for p in inspect.signature(tvl1_flow).parameters if p not in ("reference", "moving"))
 
 
-def prior_reduction(height: int, width: int) -> int:
+def prior_reduction(height: int, width: int, prior_side: int = PRIOR_SIDE) -> int:
     """The power of two by which :func:`guided_tvl1` reduces (H, W) views for the row
-    matcher's prior: the smallest that brings the larger side to at most :data:`PRIOR_SIDE`."""
+    matcher's prior: the smallest that brings the larger side to at most ``prior_side``."""
     f = 1
-    while max(height, width) > PRIOR_SIDE * f:
+    while max(height, width) > prior_side * f:
         f *= 2
     return f
 
@@ -81,6 +84,7 @@ def guided_tvl1(
     *,
     center: float | None = None,
     threshold: float = 1.0,
+    prior_side: int = PRIOR_SIDE,
     **options: object,
 ) -> Correspondence:
     """Correspondences of turntable views α apart: the row matcher's matches refined by TV-L1.
@@ -91,6 +95,13 @@ def guided_tvl1(
         alpha: angle from view 1 to view 2 in degrees.
         center: column of the rotation axis (the row matcher's), default ``(W - 1) / 2``.
         threshold: forward–backward tolerance in pixels for the validity masks.
+        prior_side: the largest side, in pixels, at which the row matcher's prior is
+            matched (:data:`PRIOR_SIDE`, 128, by default): views with a larger side are
+            reduced by the smallest power of two that brings it within ``prior_side``
+            (:func:`prior_reduction`), their matches scaled back, and TV-L1 refines them
+            at full size. The matcher's cost grows as the cube of the side it runs at; a
+            larger ``prior_side`` gives a finer prior at that cost, and changes the
+            correspondences of views larger than it.
         **options: :data:`ROW_OPTIONS` for the row matcher (``depth``, ``elevation``, …;
             ``depth`` in pixels of the views) and :data:`TVL1_OPTIONS` for TV-L1
             (``num_warp``, ``num_iter``, …).
@@ -107,6 +118,7 @@ def guided_tvl1(
             matcher nor TV-L1 takes, or a bad value of one (checked on views of any size).
     """
     v1, v2 = _check_views(view1, view2)
+    prior_side = check_int(prior_side, "prior_side", minimum=1)
     unknown = sorted(set(options) - set(ROW_OPTIONS) - set(TVL1_OPTIONS))
     if unknown:
         raise ValueError(
@@ -122,9 +134,9 @@ def guided_tvl1(
         return Correspondence(empty, empty, empty.bool(), empty.bool(), empty, empty)
     # The row matcher's cost volume grows with the pixels times the labels (W/2 · |sin α|
     # each way): on large views it runs on views reduced by a power of two to at most
-    # PRIOR_SIDE, and its matches are scaled back; TV-L1's pyramid, deeper on large views,
+    # prior_side, and its matches are scaled back; TV-L1's pyramid, deeper on large views,
     # takes up the prior's coarser steps.
-    f = prior_reduction(h, w)
+    f = prior_reduction(h, w, prior_side)
     with torch.no_grad():
         # Float32 grayscale, view 1's then view 2's, as the row matcher and TV-L1 take them.
         gray = torch.cat([v1, v2]).detach().mean(dim=1, keepdim=True).float()

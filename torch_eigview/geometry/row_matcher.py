@@ -36,6 +36,7 @@ import math
 import torch
 import torch.nn.functional as F
 
+import torch_eigview._tuning as _tuning
 from torch_eigview.check import check_alpha, check_choice, check_int, check_number, check_view_pair
 from torch_eigview.geometry.correspondence import Correspondence, correspondence_from_disparity
 from torch_eigview.geometry.sgm import aggregate, winner
@@ -43,13 +44,6 @@ from torch_eigview.geometry.sgm import aggregate, winner
 __all__ = ["COSTS", "check_row_options", "epipolar_matches", "match_rows", "volume_size"]
 
 COSTS = ("adgrad", "zncc")
-
-# Most elements of one batched grid_sample call, and so of the cost slices computed from
-# it: on the CPU a few MB, so that the sampled features, their differences and the patch
-# sums of a slice stay in cache (the same values as one call over every label, 1.6x faster
-# at 45°, 1.15x at 10°); elsewhere (a GPU) large, few kernel launches. Both bound memory.
-_CHUNK_CPU = 1 << 19
-_CHUNK = 1 << 24
 
 
 def _features(gray: torch.Tensor, cost: str) -> torch.Tensor:
@@ -71,7 +65,7 @@ def _box(x: torch.Tensor, patch: int) -> torch.Tensor:
     r = patch // 2
     padded = F.pad(x.reshape(-1, 1, h, w), (r, r, r, r), mode="replicate")[:, 0]
     # Separable, as shifted sums: a row mean then a column mean, 2·patch additions per pixel
-    # (avg_pool2d's CPU kernel is several times slower on these single-channel stacks).
+    # where a 2-D pooling window adds patch² of them.
     rows = padded[..., :w].clone()
     for i in range(1, patch):
         rows += padded[..., i : i + w]
@@ -115,7 +109,10 @@ def _cost_volume(
     """(N, L, H, W) patch cost of matching each ``ref`` pixel to ``other`` at ``grid``."""
     n, f, h, w = ref.shape
     n_labels = grid.shape[1]
-    chunk = _CHUNK_CPU if ref.device.type == "cpu" else _CHUNK
+    # A slice of labels per grid_sample call, its size the memory-for-speed trade of
+    # _tuning.COST_CHUNK_CPU / COST_CHUNK: each label's cost is its own, so the volume is
+    # the same bit for bit whatever the slicing.
+    chunk = _tuning.COST_CHUNK_CPU if ref.device.type == "cpu" else _tuning.COST_CHUNK
     per_label = max(1, chunk // max(1, n * f * h * w))
     out = []
     for start in range(0, n_labels, per_label):

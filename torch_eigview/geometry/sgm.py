@@ -39,8 +39,9 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
     order = range(s - 1, -1, -1) if reverse else range(s)
     # The previous step's costs between two +inf labels: its label neighbours k ± 1 are
     # slices of one buffer, and each step writes in place (no per-step allocations). The
-    # penalties are 0-dim tensors of the volume's dtype (a Python number is converted on
-    # every call: the same sums, a tenth slower) and the positions' slices are taken once.
+    # penalties are 0-dim tensors of the volume's dtype, converted once rather than on every
+    # call as a Python number would be (the same sums), and the positions' slices are taken
+    # once.
     padded = torch.full((n, n_labels + 2, x), float("inf"), dtype=c.dtype, device=c.device)
     prev = padded[:, 1:-1]
     low = torch.empty_like(prev[:, :1])
@@ -64,7 +65,7 @@ def _scan(c: torch.Tensor, acc: torch.Tensor, reverse: bool, p1: float, p2: floa
 def winner(volume: torch.Tensor) -> torch.Tensor:
     """(N, H, W) sub-pixel label (centred: 0 is the middle label) of least cost."""
     n_labels = volume.shape[1]
-    c0, k = volume.min(dim=1, keepdim=True)  # the first least cost, as argmin (faster over dim 1)
+    c0, k = volume.min(dim=1, keepdim=True)  # the first least cost, as argmin gives, and its value
     cm = volume.gather(1, (k - 1).clamp(min=0))
     cp = volume.gather(1, (k + 1).clamp(max=n_labels - 1))
     curv = cm - 2 * c0 + cp

@@ -18,7 +18,8 @@ eigenspace of all P = Σ_r P_r views comes out identical on every rank:
 Bad input (a rank without views, different view sizes or dtypes across ranks) is found by
 one ``all_gather_object`` of each rank's metadata before any other collective, so every
 rank raises the same ``ValueError`` instead of hanging; the process group's ``timeout``
-(``init_process_group(timeout=...)``, 30 s in ``eigview``'s distributed command) ends a collective whose peer died.
+(``init_process_group(timeout=...)``, which ``eigview``'s distributed command sets) ends a
+collective whose peer died.
 
 Run it on COIL-20 (gloo on CPU, nccl where CUDA is available)::
 
@@ -36,7 +37,9 @@ from torch_eigview.check import check_n_components
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.linalg import (
     EigenFit,
+    check_oversample,
     leading_eigenpairs,
+    oversample_for,
     randomized_passes,
     sketch_components,
     sketch_matrix,
@@ -172,7 +175,7 @@ def fit_distributed(
     *,
     method: str = "exact",
     group: dist.ProcessGroup | None = None,
-    oversample: int = 10,
+    oversample: int | str = "auto",
     n_iter: int = 2,
     seed: int = 0,
 ) -> Eigenspace:
@@ -184,8 +187,10 @@ def fit_distributed(
         n_components: k or an energy fraction, as for ``Eigenspace``.
         method: ``"exact"`` (Gram by shard broadcasts) or ``"randomized"`` (range finder).
         group: the process group (default: the world).
-        oversample, n_iter, seed: the randomized method's l = k + oversample, power
-            iterations and the seed of Ω.
+        oversample, n_iter, seed: the randomized method's l = k + ``oversample`` (an int
+            >= 0, or "auto":
+            :data:`~torch_eigview.decomposition.linalg.RANDOMIZED_OVERSAMPLE`, 10, as
+            ``StreamingEigenspace``'s), power iterations and the seed of Ω.
 
     Returns:
         A fitted ``Eigenspace`` (:meth:`Eigenspace.from_fit`), the same on every rank.
@@ -197,8 +202,9 @@ def fit_distributed(
             (``init_process_group(timeout=...)``): a rank stalled or died.
         ValueError: on every rank, when any rank has no views, bad or non-finite views, a
             view shape or dtype or a parameter (``n_components``, ``method``, ``oversample``,
-            ``n_iter``, ``seed``) different from rank 0's; ``n_components`` above the rank,
-            or an energy fraction the randomized sketch does not reach.
+            ``n_iter``, ``seed``) different from rank 0's; an ``oversample`` other than
+            "auto" or an int >= 0 (TypeError for one of another type); ``n_components``
+            above the rank, or an energy fraction the randomized sketch does not reach.
     """
     if not dist.is_available() or not dist.is_initialized():
         raise RuntimeError("fit_distributed needs torch.distributed initialized (init_process_group)")
@@ -214,6 +220,8 @@ def fit_distributed(
         "seed": seed,
     }
     counts, feature_shape = _shard_layout(views, rank, group, params)
+    # Checked once every rank is known to hold the same value, so that all raise alike.
+    oversample = check_oversample(oversample)
     n_views = sum(counts)
     image_shape = (feature_shape[0], feature_shape[1], feature_shape[2]) if len(feature_shape) == 3 else None
     dtype = views.dtype
@@ -226,7 +234,9 @@ def fit_distributed(
     with torch.no_grad():
         mean64 = all_reduce(x.double().sum(dim=0)) / n_views
         if method == "randomized":
-            omega = sketch_matrix(n_components, oversample, n_views, x.shape[1], seed, x.device)
+            omega = sketch_matrix(
+                n_components, oversample_for(oversample, "randomized"), n_views, x.shape[1], seed, x.device
+            )
             q, z, total = randomized_passes(
                 [x], mean64, omega, n_iter, all_reduce, row_offset=sum(counts[:rank])
             )

@@ -1,8 +1,9 @@
 """Synthesis of many objects over worker processes, in order, with bounded memory.
 
-Per object the build is optical flow (scikit-image, one core) and the warp maps (many
-small torch operations that two OpenMP threads barely speed up). Objects are independent,
-so the cheap way to use the machine's cores is one object per process:
+Per object the build is optical flow and the warp maps: many small torch operations,
+each too little work to split over OpenMP threads (``torch_eigview._tuning``'s
+``THREADS_DEFAULT``). Objects are independent, so the cheap way to use the machine's
+cores is one object per process:
 :func:`synthesize_objects` hands each object's seed views to a pool of ``workers``
 processes (one torch thread each) and yields the results in input order, with at most
 ``2 · workers`` jobs of a few objects each in flight (memory: that many objects' views,
@@ -30,6 +31,7 @@ from typing import Any, TypeVar
 import torch
 import torch.multiprocessing as mp
 
+import torch_eigview._tuning as _tuning
 from torch_eigview.check import as_angle_tensor, check_choice, check_int
 from torch_eigview.scale.job_warnings import routing
 from torch_eigview.scale.thread_policy import allowed_cpus
@@ -43,9 +45,7 @@ from torch_eigview.synthesis import (
 )
 
 __all__ = [
-    "GROUP_OBJECTS",
     "KINDS",
-    "PARALLEL_PIXELS",
     "available_cpus",
     "each_or_alone",
     "group_size",
@@ -68,13 +68,6 @@ def available_cpus() -> int:
     return len(allowed_cpus())
 
 
-#: Synthesized pixels (views × H × W over all objects) from which :func:`object_workers`
-#: starts worker processes: about 3,000 views of 128 × 128, some 10 s of synthesis on one
-#: core (3.3 ms a view measured on COIL-20), against 3–4 s for a worker to start (it
-#: imports torch, kornia and scikit-image). A cost model, not a figure tuned on results.
-PARALLEL_PIXELS = 5e7
-
-
 def object_workers(n_views: int, pixels: int, n_objects: int, kind: str = "process") -> int:
     """The commands' workers for synthesizing ``n_views`` views of ``pixels`` pixels each
     over ``n_objects`` objects: one per CPU this process may use, at most one per object.
@@ -82,9 +75,10 @@ def object_workers(n_views: int, pixels: int, n_objects: int, kind: str = "proce
     Threads (``kind="thread"``) cost nothing to start, so there is one per CPU whenever
     there are two objects and two CPUs, and torch runs one intra-op thread (the commands'
     policy; with more, as under ``--threads 2``, each worker thread's OpenMP team would
-    oversubscribe the cores, so there are none). Processes pay 3–4 s each to start, so they start
-    only when the work repays it (:data:`PARALLEL_PIXELS`), else 0 (synthesis in the
-    calling process).
+    oversubscribe the cores, so there are none). A process pays a fresh interpreter's
+    start (importing torch, kornia and scikit-image), so processes start only for at least
+    ``torch_eigview._tuning.PARALLEL_PIXELS`` synthesized pixels, where the work repays
+    it, else 0 (synthesis in the calling process).
 
     Each worker runs one torch thread, and the workers do not wait for each other while
     they run, so a busy neighbour slows them as it slows any process instead of making
@@ -94,7 +88,7 @@ def object_workers(n_views: int, pixels: int, n_objects: int, kind: str = "proce
     cpus = available_cpus()
     if cpus < 2 or n_objects < 2:
         return 0
-    if kind == "process" and n_views * pixels < PARALLEL_PIXELS:
+    if kind == "process" and n_views * pixels < _tuning.PARALLEL_PIXELS:
         return 0
     if kind == "thread" and torch.get_num_threads() > 1:
         return 0
@@ -147,8 +141,9 @@ def synthesize_objects(
             is shut down).
 
     Example:
-        >>> from torch_eigview.apps.bench_scaling import smooth_views
-        >>> seeds = [smooth_views(o, 6, 1, 32)[[0, 5]] for o in range(3)]
+        >>> textures = torch.rand(3, 1, 1, 8, 8, generator=torch.Generator().manual_seed(0))
+        >>> blocky = textures.repeat_interleave(4, -1).repeat_interleave(4, -2)  # 3 objects, 32 x 32
+        >>> seeds = [torch.cat([t, t.roll(1, -1)]) for t in blocky]  # two views a column apart each
         >>> [s.views.shape[0] for s in synthesize_objects(seeds, 5.0, [0.0, 2.5, 5.0])]
         [3, 3, 3]
     """
@@ -225,21 +220,14 @@ def _own_group(outcomes: list[SynthesizedViews | Exception]) -> list[Synthesized
     return [out if isinstance(out, Exception) else own_views(out) for out in outcomes]
 
 
-#: At most this many objects share one job of the commands' synthesis
-#: (:func:`group_size`): their flows are batched
-#: (:func:`~torch_eigview.synthesis.object_geometries`), and a job's views are held
-#: until it returns. With two worker threads four objects per call take most of the gain
-#: (see :data:`~torch_eigview.synthesis.seed_pairs.FLOW_BATCH_CPU`); eight let 20 objects
-#: go to two workers as four equal jobs.
-GROUP_OBJECTS = 8
-
-
 def group_size(n_objects: int, workers: int) -> int:
     """Objects per job for ``n_objects`` over ``workers`` (0: this process): as few jobs as
-    :data:`GROUP_OBJECTS` allows, in a multiple of the workers so that they finish together
-    (20 objects over 2 workers: 4 jobs of 5)."""
+    ``torch_eigview._tuning.GROUP_OBJECTS`` objects a job allow (their flows batched, a
+    job's views held until it returns), in a multiple of the workers so that they finish
+    together (20 objects over 2 workers: 4 jobs of 5). The objects' views do not depend
+    on it."""
     slots = max(1, workers)
-    jobs = slots * max(1, math.ceil(n_objects / (slots * GROUP_OBJECTS)))
+    jobs = slots * max(1, math.ceil(n_objects / (slots * _tuning.GROUP_OBJECTS)))
     return max(1, math.ceil(n_objects / jobs))
 
 

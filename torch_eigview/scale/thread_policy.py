@@ -1,13 +1,14 @@
 """How many threads a command's torch (and BLAS) operations use: a policy and a context manager.
 
 The map building, the warp and the flow are many small operations on tensors of a few
-MB: a second OpenMP thread barely helps them on a quiet machine (two threads took 0.84×
-the one-thread time of a COIL-20 run), and beside a process that keeps the cores busy
-the threads of a parallel region wait for each other and spin, and the same run took
-5–8× longer. One intra-op thread per process never collapses that way, so it is the
-default of the ``eigview`` commands (:func:`default_threads`); the parallelism that does
-pay is over objects, one process each (:func:`~torch_eigview.scale.parallel.synthesize_objects`
-with ``workers``, whose workers run one thread each).
+MB: a second OpenMP thread halves each operation's little work but adds a barrier to it,
+and beside a process that keeps the cores busy the threads of a parallel region wait at
+every barrier for a descheduled partner, spinning. One intra-op thread per process never
+waits for another, so it is the default of the ``eigview`` commands
+(:func:`default_threads`; the cost model is ``torch_eigview._tuning``'s); the parallelism
+that does pay is over objects, one worker each
+(:func:`~torch_eigview.scale.parallel.synthesize_objects` with ``workers``, whose workers
+run one thread each).
 
 Library functions never change the thread settings: the commands apply the policy with
 the :func:`threads` context manager, which restores the caller's settings on exit, and a
@@ -16,11 +17,11 @@ script may do the same::
     with threads(1):
         views = synthesize_views(seeds, 5.0, thetas)
 
-Large matrix products are the exception: a Gram matrix of thousands of views runs about
-twice as fast on two idle cores, and collapses like the rest beside a busy neighbour. The
-commands run their eigen step with :func:`product_threads`, which counts the CPUs that
-other processes leave idle (sampled for a tenth of a second just before the step) and
-uses that many threads, at least one.
+Large matrix products are the exception: a Gram matrix of thousands of views is one
+long compute-bound operation that splits evenly over idle cores, and stalls like the rest
+beside a busy neighbour. The commands run their eigen step with :func:`product_threads`,
+which counts the CPUs that other processes leave idle (sampled for a tenth of a second
+just before the step) and uses that many threads, at least one.
 """
 
 from __future__ import annotations
@@ -34,11 +35,10 @@ from pathlib import Path
 
 import torch
 
+import torch_eigview._tuning as _tuning
 from torch_eigview.check import check_int, check_limit, check_positive
 
 __all__ = [
-    "PRODUCT_FLOPS",
-    "THREADS_DEFAULT",
     "allowed_cpus",
     "default_threads",
     "eigen_flops",
@@ -49,25 +49,17 @@ __all__ = [
     "threads",
 ]
 
-#: Intra-op threads of a command unless ``--threads`` says otherwise (see the module).
-THREADS_DEFAULT = 1
-
-#: Products below this many floating-point operations (about a second on one core) run
-#: with the policy's one thread; sampling the idle CPUs costs a tenth of a second.
-PRODUCT_FLOPS = 1e11
-
-# True inside threads(None), the commands' policy; an explicit count turns it off.
-#: Threads one ``threads(n)`` may ask for (the environment variable that raises it, the limit).
-_THREAD_LIMIT = ("EIGVIEW_MAX_THREADS", 1024)
 #: Seconds :func:`idle_cpus` may sample for.
 _MAX_INTERVAL = 60.0
+# True inside threads(None), the commands' policy; an explicit count turns it off.
 _POLICY: ContextVar[bool] = ContextVar("torch_eigview_thread_policy", default=False)
 
 
 def default_threads() -> int:
-    """The commands' default number of intra-op threads: :data:`THREADS_DEFAULT`, never more
-    than torch would use itself (``torch.get_num_threads()``, e.g. under ``OMP_NUM_THREADS``)."""
-    return max(1, min(THREADS_DEFAULT, torch.get_num_threads()))
+    """The commands' default number of intra-op threads: ``torch_eigview._tuning``'s
+    ``THREADS_DEFAULT`` (one), never more than torch would use itself
+    (``torch.get_num_threads()``, e.g. under ``OMP_NUM_THREADS``)."""
+    return max(1, min(_tuning.THREADS_DEFAULT, torch.get_num_threads()))
 
 
 def resolve_threads(n: int | None) -> int:
@@ -75,7 +67,7 @@ def resolve_threads(n: int | None) -> int:
     if n is None:
         return default_threads()
     count = check_int(n, "threads", minimum=1)
-    check_limit(count, "threads", "threads", *_THREAD_LIMIT)  # each one a stack and a pool slot
+    check_limit(count, "threads", "threads", "max_threads")  # each one a stack and a pool slot
     return count
 
 
@@ -160,10 +152,10 @@ def for_products(flops: float) -> Iterator[int]:
     """Runs a matrix-product step of about ``flops`` operations under the commands' policy.
 
     Inside :func:`threads` with no count (the commands' default policy) and for a product
-    of at least :data:`PRODUCT_FLOPS`, the body runs with :func:`product_threads`; with an
-    explicit count (``--threads N``), outside any policy (library use), or for a smaller
-    product (where sampling the CPUs would cost more than it gains), the thread settings
-    stay as they are.
+    of at least ``torch_eigview._tuning.PRODUCT_FLOPS`` operations, the body runs with
+    :func:`product_threads`; with an explicit count (``--threads N``), outside any policy
+    (library use), or for a smaller product (where sampling the CPUs would cost a large
+    share of what it gains), the thread settings stay as they are.
 
     Yields:
         The number of threads in force.
@@ -174,7 +166,7 @@ def for_products(flops: float) -> Iterator[int]:
         1
     """
     check_positive(flops, "flops", allow_zero=True)
-    if not _POLICY.get() or flops < PRODUCT_FLOPS:
+    if not _POLICY.get() or flops < _tuning.PRODUCT_FLOPS:
         yield torch.get_num_threads()
         return
     with threads(product_threads()) as n:

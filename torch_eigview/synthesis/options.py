@@ -42,11 +42,11 @@ class SynthesisOptions:
         max_stretch: see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`.
         flow_options: keyword arguments for the flow function (TV-L1's ``num_warp``,
             ``num_iter``, ``tol``, ``prefilter``, …; the same names for the torch and the
-            scikit-image TV-L1; the guided flow takes TV-L1's and the row matcher's
-            ``depth``, ``elevation``, ``cost``, ``patch``, ``p1``, ``p2``). By default TV-L1
-            (alone or in the guided flow) runs 3 warps of 5 iterations
-            (scikit-image's defaults are 5 and 10): 3x faster, and on COIL-20 as accurate
-            (see the README).
+            scikit-image TV-L1; the guided flow takes TV-L1's, the row matcher's
+            ``depth``, ``elevation``, ``cost``, ``patch``, ``p1``, ``p2``, and its own
+            ``prior_side``). By default TV-L1 (alone or in the guided flow) runs 3 warps of
+            5 iterations (scikit-image's defaults are 5 and 10): 15 fixed-point steps per
+            pyramid level instead of 50, and on COIL-20 as accurate (see the README).
         blend: how the two seeds of a pair share the pixels both see, ``"linear"`` or
             ``"nearest"`` (see :class:`~torch_eigview.warp.novel_view.NovelViewWarp`).
         silhouette: silhouette-aware sampling: only the seeds' foreground pixels

@@ -15,18 +15,18 @@ from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.check import check_finite, check_float_tensor, check_ndim
+import torch_eigview._tuning as _tuning
+from torch_eigview.check import check_finite, check_float_tensor, check_int, check_ndim
 from torch_eigview.geometry.angles import pair_angles
 from torch_eigview.geometry.correspondence import Correspondence
 from torch_eigview.geometry.flow import estimate_correspondence
-from torch_eigview.geometry.guided_flow import prior_reduction
+from torch_eigview.geometry.guided_flow import PRIOR_SIDE, prior_reduction
 from torch_eigview.geometry.pose import estimate_elevation
 from torch_eigview.geometry.row_matcher import volume_size
 from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.warp.normalize import seed_foreground
 
 __all__ = [
-    "FLOW_BATCH_CPU",
     "MAX_AUTO_ELEVATION",
     "ElevationFallbackWarning",
     "PairGeometry",
@@ -44,16 +44,6 @@ MAX_AUTO_ELEVATION = 89.0
 #: The flows that :func:`object_geometries` batches over objects: TV-L1 in one call, the
 #: row matcher and the guided flow in one call per angle between seeds.
 _BATCHED = ("tvl1", "rows", "guided")
-
-#: Cost-volume elements (both directions of every pair) one row-matcher call of
-#: :func:`object_geometries` takes on the CPU: 5 pairs of 128 × 128 views at α = 10°,
-#: 9 at 5°, one at 45°. A call costs the same Python and dispatch per tensor operation
-#: whatever the batch (thousands of them for the guided flow of one pair), which
-#: worker threads pay in turn under the GIL: on two threads 20 objects' flows at α = 10
-#: took 1.0–1.3 s in batches of 4–10 pairs against 1.95–2.25 s one pair at a time (2.0–2.2 s
-#: on one thread either way). Larger batches gain little and cost memory, a few volumes
-#: each: 0.46 GB peak for two threads one pair at a time at α = 45°, 0.97 GB four at a time.
-FLOW_BATCH_CPU = 1 << 22
 
 
 class ElevationFallbackWarning(UserWarning):
@@ -132,9 +122,10 @@ def object_geometries(
     object (both directions) is one batched flow call, on the seeds' device, and with
     ``"guided"`` or ``"rows"`` one call per distinct angle between seeds (objects of other
     seed shapes: one object at a time). On the CPU the row matcher's calls take as many
-    pairs as :data:`FLOW_BATCH_CPU` allows. The flows treat each pair of a batch on its
-    own: the records are those of :func:`pair_geometry` (bit for bit with the guided flow
-    and the row matcher, ``tests/test_object_geometries.py``).
+    pairs as their cost volumes allow (``torch_eigview._tuning.FLOW_BATCH_CPU``: a bound
+    on a call's memory). The flows treat each pair of a batch on its own: the records are
+    those of :func:`pair_geometry` (bit for bit with the guided flow and the row matcher,
+    ``tests/test_object_geometries.py``).
 
     Args:
         objects: per object its (V, C, H, W) seed views, the same shape for all.
@@ -195,14 +186,17 @@ def _object_records(
 def _pairs_per_call(seeds: torch.Tensor, alpha: float, opts: SynthesisOptions) -> int | None:
     """How many seed pairs of (V, C, H, W) ``seeds`` ``alpha`` apart one flow call takes: on
     the CPU with the row matcher (``"rows"``, ``"guided"``) those whose cost volumes fit in
-    :data:`FLOW_BATCH_CPU` elements (at least one), else None (all at once)."""
+    ``_tuning.FLOW_BATCH_CPU`` elements (at least one), else None (all at once)."""
     if seeds.device.type != "cpu" or opts.flow not in ("rows", "guided"):
         return None
     h, w = seeds.shape[-2:]
-    f = prior_reduction(h, w) if opts.flow == "guided" else 1
-    depth = opts.flow_kwargs().get("depth")
+    kwargs = opts.flow_kwargs()
+    f = 1
+    if opts.flow == "guided":  # checked as guided_tvl1 checks it, before the flow runs
+        f = prior_reduction(h, w, check_int(kwargs.get("prior_side", PRIOR_SIDE), "prior_side", minimum=1))
+    depth = kwargs.get("depth")
     volume = volume_size(h // f, w // f, alpha, None if depth is None else float(depth) / f)  # type: ignore[arg-type]
-    return max(1, FLOW_BATCH_CPU // (2 * volume))  # both directions
+    return max(1, _tuning.FLOW_BATCH_CPU // (2 * volume))  # both directions
 
 
 def _by_angle(

@@ -4,9 +4,12 @@ Convention:
     Images are (C, H, W) (batched (B, C, H, W)); x is the column, y the row; pixel
     centres are at integer coordinates. A subclass builds :class:`~torch_eigview.warp.maps.WarpMaps`
     (target → source, in pixels) from the correspondences of the two seed views; the seed
-    images are then sampled as :func:`kornia.geometry.transform.remap` samples them
-    (bilinear, zero padding, ``align_corners=True``: the tent weights of Eq. 4; one
-    ``grid_sample`` call for all sources and angles) and blended with the maps' weights.
+    images are then sampled and blended with the maps' weights. The sampling is
+    ``torch.nn.functional.grid_sample`` called directly (bilinear, zero padding,
+    ``align_corners=True``: the tent weights of Eq. 4), one call per source for all
+    angles, on coordinates normalized by kornia's rule (:func:`kornia_scale`): the samples
+    of :func:`kornia.geometry.transform.remap` with ``align_corners=True`` bit for bit,
+    which stays the reference the tests compare with (``tests/warp/test_fast_paths.py``).
 """
 
 from __future__ import annotations
@@ -218,10 +221,23 @@ class ViewWarp(torch.nn.Module):
 
 
 def kornia_scale(n: int, like: torch.Tensor) -> tuple[torch.Tensor, float]:
-    """kornia's ``normalize_pixel_coordinates`` along an axis of ``n`` pixels: the grid
-    coordinate of pixel x is ``x * factor - offset``, the factor ``2 / (n - 1)`` divided in
-    ``like``'s dtype (as kornia divides), the offset 1; 1 and 0 for a single pixel. The
-    one rule of the samplers that must give ``remap``'s samples bit for bit."""
+    """kornia's :func:`~kornia.geometry.conversions.normalize_pixel_coordinates` along an
+    axis of ``n`` pixels, as a factor and an offset: the grid coordinate of pixel x is
+    ``x * factor - offset``, the factor ``2 / (n - 1)`` in ``like``'s dtype, the offset 1;
+    1 and 0 for a single pixel.
+
+    A copy of kornia's rule rather than a call, for the view sampler, which normalizes
+    every pixel's coordinates: kornia's function takes and returns interleaved (…, 2)
+    (x, y) pairs, so calling it costs a stack of both coordinates into a (…, 2) tensor, a
+    pass that broadcasts the factor over the pairs, and a second full-size grid for its
+    result, where this factor lets the sampler write each coordinate's plane in one pass
+    into the only full-size buffer. (The separable sampler of
+    :func:`~torch_eigview.warp.normalize.normalize_extent` has W + H coordinates to
+    normalize, not every pixel's, and calls kornia's function.) For
+    float32 and float64 the factor is kornia's bit for bit (kornia rounds the double
+    ``2 / (n - 1)`` to the coordinates' dtype, this divides in that dtype: the same
+    correctly rounded quotient), which ``tests/warp/test_fast_paths.py`` checks against
+    kornia's function itself."""
     one = torch.ones((), dtype=like.dtype, device=like.device)
     return (one, 0.0) if n == 1 else (2.0 / (one * n - 1.0), 1.0)
 
@@ -231,10 +247,11 @@ def _sample_views(
 ) -> list[torch.Tensor]:
     """Bilinear samples of the seed views at the maps, all angles of a source in one call.
 
-    kornia's ``remap`` per source, without its per-call overhead and without T copies of
-    each seed: the T angles' points go into one grid per (source, object), (B, T·H, W),
-    so a seed image is read in place. The coordinates are normalized with kornia's
-    formula (``2 / (W - 1)`` times the pixel, minus 1) and sampled with zero padding and
+    What kornia's ``remap`` computes, through ``grid_sample`` directly: ``remap`` takes
+    one (B, H, W) map per image, so it would need T copies of each seed (one per angle)
+    and a call per copy; here the T angles' points go into one grid per (source,
+    object), (B, T·H, W), and a seed image is read in place. The coordinates are
+    normalized with kornia's rule (:func:`kornia_scale`) and sampled with zero padding and
     ``align_corners=True``, so the samples equal ``remap``'s bit for bit.
 
     Args:
@@ -259,9 +276,10 @@ def _sample_views(
         torch.is_grad_enabled() and (xs.requires_grad or ys.requires_grad)
     ):
         # One plane per coordinate, each written in one contiguous pass, and read through a
-        # permuted view as (…, 2) pairs (grid_sample reads it as fast as an interleaved grid,
-        # which costs a strided pass or a complex interleave to write). The planes are the
-        # only full-size buffer, which keeps a call's peak of memory low.
+        # permuted view as (…, 2) pairs (grid_sample reads a grid through its strides, so
+        # the view serves as an interleaved grid would, which costs a strided pass or a
+        # stack to write). The planes are the only full-size buffer, which keeps a call's
+        # peak of memory low.
         planes = xs.new_empty((2, *xs.shape))
         torch.mul(xs, fx, out=planes[0]).sub_(ox)
         torch.mul(ys.expand_as(xs), fy, out=planes[1]).sub_(oy)

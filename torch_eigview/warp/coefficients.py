@@ -69,8 +69,8 @@ def _gather_coefficients(
     use = weight != 0
     # Clamping keeps floor() in the int64 range; beyond [-1, W] no neighbour is inside.
     x = torch.where(use, src_x, 0.0).clamp(-2.0, w + 1.0)
-    # kornia's remap normalizes pixel columns to [-1, 1] and grid_sample maps them back; in
-    # float32 that round trip moves x by ~W·eps. Take the same round trip, so that C holds
+    # The view sampler normalizes pixel columns to [-1, 1] as kornia's remap does, and
+    # grid_sample maps them back; in float32 that round trip moves x by ~W·eps. Take the same round trip, so that C holds
     # the weights grid sampling actually applies, not the ones it would in exact arithmetic.
     x = ((2.0 / (w - 1)) * x - 1 + 1) * ((w - 1) / 2) if w > 1 else x
     k0 = x.floor()
@@ -105,7 +105,7 @@ def _gather_coefficients_2d(
     dev = src_x.device
     n = h * w
     use = weight != 0
-    # The pixel -> normalized -> pixel round trip of kornia's remap, as in the row case.
+    # The sampler's pixel -> normalized -> pixel round trip (kornia's remap's), as in the row case.
     x = torch.where(use, src_x, 0.0).clamp(-2.0, w + 1.0)
     y = torch.where(use, src_y, 0.0).clamp(-2.0, h + 1.0)
     x = ((2.0 / (w - 1)) * x - 1 + 1) * ((w - 1) / 2) if w > 1 else x

@@ -6,7 +6,8 @@ Convention:
     vertical axis), so every map here is a map along rows: ``dst_x_for_src`` (forward,
     Eq. 2) gives the target column of each source pixel, ``src_x_for_dst`` (inverse) the
     source column sampled by each target pixel. Maps are in pixels, not normalized, and
-    are handed to :func:`kornia.geometry.transform.remap` with ``align_corners=True``.
+    are sampled as :func:`kornia.geometry.transform.remap` samples them with
+    ``align_corners=True`` (:class:`~torch_eigview.warp.base.ViewWarp`).
 
 The maps depend only on the correspondences, so the synthesized view is linear in the
 seed images: :class:`~torch_eigview.warp.base.ViewWarp` samples the seeds with them and

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
+from kornia.geometry.conversions import normalize_pixel_coordinates
 from kornia.geometry.transform import remap
 
 from torch_eigview.check import check_float_tensor, check_ndim
-from torch_eigview.warp.base import kornia_scale
 
 __all__ = [
     "FILLED_FRAME",
@@ -143,7 +143,8 @@ def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
     The scale is the same along x and y (the aspect ratio is kept) and chosen so that the
     box's longer side spans the image, with the box centred; bilinear sampling (kornia
     ``remap``'s samples, ``align_corners=True``, zeros outside; the map is separable, so
-    float32 and float64 images take :func:`_sample_separable`, the same values bit for bit).
+    float32 and float64 images take :func:`_sample_separable`, the same values bit for bit,
+    and other dtypes ``remap`` itself).
     An image with an empty mask is returned unchanged.
 
     Args:
@@ -189,16 +190,20 @@ def normalize_extent(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
 def _sample_separable(images: torch.Tensor, map_x: torch.Tensor, map_y: torch.Tensor) -> torch.Tensor:
     """kornia ``remap`` (bilinear, zeros, ``align_corners=True``) of (P, C, H, W) ``images``
     at a separable map, columns ``map_x`` (P, 1, W) and rows ``map_y`` (P, H, 1): the same
-    samples bit for bit. The coordinates are normalized with kornia's formula (the factor
-    ``2 / (n − 1)`` divided in the images' dtype, times the pixel, minus 1) on the W + H
-    values (:func:`~torch_eigview.warp.base.kornia_scale`, as the view sampler does), not
-    on every pixel, where ``remap`` spent about half its time (7 of 13 ms a call
-    in a profile of 41 views of 128 × 128 on one thread); the grid is two planes read as
-    (…, 2) pairs."""
+    samples bit for bit.
+
+    ``remap`` stacks its (P, H, W) maps into a (P, H, W, 2) grid and normalizes every
+    pixel's pair, about as much work as the sampling itself. A separable map has only
+    W + H distinct coordinates: they are normalized by kornia's own
+    :func:`~kornia.geometry.conversions.normalize_pixel_coordinates` (``remap``'s
+    normalization, so the values are its values), then written into two planes, one per
+    coordinate, which ``grid_sample`` reads as (…, 2) pairs through a permuted view."""
     p, _, h, w = images.shape
+    # (x, y) pairs as kornia takes them; the other coordinate is a placeholder, not used.
+    x = normalize_pixel_coordinates(torch.stack([map_x, torch.zeros_like(map_x)], dim=-1), h, w)[..., 0]
+    y = normalize_pixel_coordinates(torch.stack([torch.zeros_like(map_y), map_y], dim=-1), h, w)[..., 1]
     planes = images.new_empty(2, p, h, w)
-    for plane, coord, n in ((planes[0], map_x, w), (planes[1], map_y, h)):
-        factor, offset = kornia_scale(n, images)
-        plane.copy_((coord * factor - offset).expand(p, h, w))
+    planes[0].copy_(x.expand(p, h, w))
+    planes[1].copy_(y.expand(p, h, w))
     grid = planes.permute(1, 2, 3, 0)
     return F.grid_sample(images, grid, mode="bilinear", padding_mode="zeros", align_corners=True)

@@ -34,9 +34,11 @@ class NovelViewWarp(ViewWarp):
     Eq. 2 with Eq. 7's coefficients, ``x3 - c = a (x1 - c) + b (x2 - c)``, where ``c`` is
     the column of the rotation axis. The forward map of each seed view is inverted
     (:func:`~torch_eigview.geometry.row_maps.invert_row_map`) and the seed images are
-    sampled with kornia's ``remap`` (bilinear: the tent weights of Eq. 4). With two seed views both are warped and
-    blended: where both see a target pixel the nearer view in angle weighs more, where
-    only one does (an occlusion in the other) that one is used alone.
+    sampled bilinearly (the tent weights of Eq. 4) by ``grid_sample``, as kornia's
+    ``remap`` samples them, bit for bit (:class:`~torch_eigview.warp.base.ViewWarp`). With
+    two seed views both are warped and blended: where both see a target pixel the nearer
+    view in angle weighs more, where only one does (an occlusion in the other) that one is
+    used alone.
 
     Args:
         alpha: angle of the second seed view in degrees.

@@ -10,9 +10,9 @@ Convention:
 Two ways to fill C:
     * ``"gather"`` (:meth:`SparseViewOperator.from_maps`): target→source maps, the tent
       weights ``1 − |x − k|`` of the two source neighbours of ``x = src_x[t, j, l]``
-      (zeros outside the row), i.e. exactly what kornia's ``remap`` (bilinear,
-      ``align_corners=True``, zeros padding) samples in
-      :meth:`torch_eigview.warp.novel_view.NovelViewWarp.apply_maps`.
+      (zeros outside the row), i.e. exactly what
+      :meth:`torch_eigview.warp.novel_view.NovelViewWarp.apply_maps` samples (kornia's
+      ``remap``'s samples: bilinear, ``align_corners=True``, zeros padding).
     * ``"splat"`` (:meth:`SparseViewOperator.from_forward_map`): the literal Eq. 4, a
       forward map x3 of each source pixel k, ``y_k = 1 − |x3_k − l|`` where below 1.
       It is not normalized: where the forward map stretches or folds a row, a target

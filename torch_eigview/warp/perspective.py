@@ -14,8 +14,8 @@ at θ is transferred with the trifocal tensor ``<seed, other seed, θ>``
 and the novel view's rotation and translation, Shashua and Avidan's tensor operator) and
 its match in the other seed view; the forward map is inverted by triangle rasterization
 with a z-buffer (:func:`~torch_eigview.warp.raster.invert_map_2d`; depths from the seed pair
-by triangulation, kornia), and the seed images are sampled with kornia's ``remap`` (2D
-bilinear weights). :class:`~torch_eigview.warp.operator.SparseViewOperator` builds the same
+by triangulation, kornia), and the seed images are sampled with 2D bilinear weights by
+``grid_sample``, as kornia's ``remap`` samples them (:class:`~torch_eigview.warp.base.ViewWarp`). :class:`~torch_eigview.warp.operator.SparseViewOperator` builds the same
 views as G·C with whole-image coefficient vectors (``layout="image"``).
 """
 

@@ -30,8 +30,9 @@ def field_sampler(fields: torch.Tensor, t: int, rows: int | None = None) -> Call
     sx, sy = 2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)
     h = h if rows is None else rows
     # Written in place when nothing is differentiated, one plane per coordinate: a
-    # permuted view is a grid grid_sample reads as fast, and each plane is written in one
-    # contiguous pass (an interleaved (…, 2) grid costs about three times as much to write).
+    # permuted view is a grid grid_sample reads as it reads an interleaved one, and each
+    # plane is written in one contiguous pass (an interleaved (…, 2) grid is written with a
+    # stride of 2, or assembled by a stack that copies both coordinates once more).
     planes = fields.new_empty(2, b, t, h, w)
     firsts = [fields[:, :n].contiguous() for n in range(1, f)] + [fields]
 
@@ -100,10 +101,10 @@ def refine_2d(
     y_at = (yy + ky_g * c, ky_g, ky_d)
 
     # Without autograd the iteration writes into buffers it reuses (the same operations,
-    # so the same values): a fresh full-size output costs nearly as much again as the
-    # arithmetic (one product of 41 × 128 × 128 floats on one thread: 0.99 ms into a new
-    # tensor, 0.57 ms into a reused one). Two buffers per coordinate (a step reads one
-    # and writes the other), the clamped column and a temporary.
+    # so the same values): these steps are a few flops per value, so a fresh full-size
+    # output per operation (its allocation and the first touch of its pages) would cost
+    # about as much as the arithmetic. Two buffers per coordinate (a step reads one and
+    # writes the other), the clamped column and a temporary.
     grad = torch.is_grad_enabled() and any(v.requires_grad for v in (src_x, disparity, *coef))
     bufs = None if grad else [torch.empty_like(src_x) for _ in range(6)]
 
