@@ -15,7 +15,6 @@ import pytest
 import torch
 
 from torch_eigview import Eigenspace, NearestNeighborRecognizer
-from torch_eigview.apps.bench_plot import plot_results
 from torch_eigview.apps.cli import main
 from torch_eigview.io.checkpoint import save_recognizer
 from torch_eigview.io.onnx import compare_with_eager, export_onnx, export_projection, read_metadata
@@ -98,10 +97,21 @@ def test_commands_name_the_onnx_extra(
     assert not (tmp_path / "r.onnx").exists()
 
 
-def test_plot_names_the_plot_extra(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_demo_figure_names_the_plot_extra(
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    recognizer: NearestNeighborRecognizer,
+) -> None:
+    """Without matplotlib the demo skips its figure, saying which extra draws it."""
+    from torch_eigview.apps import demo
+
     missing(monkeypatch, "matplotlib", "matplotlib.pyplot")
-    with pytest.raises(ImportError, match=r"needs matplotlib, .*pip install 'torch_eigview\[plot\]'"):
-        plot_results({"warp": {}}, str(tmp_path / "bench.png"))
+    monkeypatch.setattr(demo, "recognition_experiment", lambda *args, **kwargs: {"recognizer": recognizer})
+    record = demo.run_demo(str(tmp_path / "demo.png"), verbose=False)
+    assert record["figure"] is None and not (tmp_path / "demo.png").exists()
+    out = capsys.readouterr().out
+    assert "needs matplotlib" in out and "pip install 'torch_eigview[plot]'" in out, out
 
 
 @pytest.mark.slow

@@ -354,8 +354,9 @@ def test_extent_auto_normalizes_only_seeds_that_fill_the_frame() -> None:
 def test_object_geometries_batch_equals_each_object() -> None:
     """One batched TV-L1 call over objects gives each object's own pair_geometry (to the
     batched flow's rounding), and the synthesized views follow."""
-    from torch_eigview.apps.bench_scaling import smooth_views
     from torch_eigview.synthesis import object_geometries
+
+    from tests.helpers import smooth_views
 
     objects = [smooth_views(o, 6, 1, 32)[[0, 3, 5]] for o in range(3)]
     batched = object_geometries(objects, 5.0)

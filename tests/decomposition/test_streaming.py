@@ -7,9 +7,10 @@ import itertools
 import pytest
 import torch
 
-from torch_eigview.apps.bench_scaling import smooth_views
 from torch_eigview.decomposition.eigenspace import Eigenspace
 from torch_eigview.decomposition.streaming import StreamingEigenspace, blocks_of
+
+from tests.helpers import smooth_views
 
 
 def make_views(

@@ -9,10 +9,9 @@ from collections.abc import Iterator
 import pytest
 import torch
 
-from torch_eigview.apps.bench_scaling import smooth_views
+import torch_eigview._tuning as _tuning
 from torch_eigview.scale.job_warnings import job_warnings
 from torch_eigview.scale.parallel import (
-    GROUP_OBJECTS,
     each_or_alone,
     group_size,
     grouped,
@@ -20,6 +19,8 @@ from torch_eigview.scale.parallel import (
     synthesize_objects,
 )
 from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+
+from tests.helpers import smooth_views
 
 THETAS = [-6.0, -2.0, 0.0, 2.5, 5.0, 9.0]
 
@@ -200,12 +201,19 @@ def test_an_error_reading_the_jobs_comes_after_the_jobs_before_it(workers: int) 
         list(map_ordered(_job, _jobs_then_error(7), workers, kind="thread"))
 
 
-def test_group_size_and_grouped() -> None:
-    """Jobs of at most GROUP_OBJECTS objects, as many per worker; the grouping reads its
-    items lazily and raises a reading error after the group read before it."""
-    assert [group_size(n, 2) for n in (1, 2, 3, 16, 20, 100)] == [1, 1, 2, 8, 5, 8]
-    assert [group_size(n, 0) for n in (1, 8, 9, 20)] == [1, 8, 5, 7]
-    assert all(group_size(n, w) <= GROUP_OBJECTS for n in range(1, 60) for w in range(0, 5))
+@pytest.mark.parametrize("limit", [_tuning.GROUP_OBJECTS, 3, 1])
+def test_group_size_and_grouped(monkeypatch: pytest.MonkeyPatch, limit: int) -> None:
+    """Jobs of at most GROUP_OBJECTS objects (the default or a smaller one), and no more
+    jobs than that needs per round of the workers; the grouping reads its items lazily
+    and raises a reading error after the group read before it."""
+    monkeypatch.setattr(_tuning, "GROUP_OBJECTS", limit)
+    for n in range(1, 60):
+        for w in range(0, 5):
+            size = group_size(n, w)
+            slots = max(1, w)
+            assert 1 <= size <= limit
+            assert -(-n // size) <= slots * -(-n // (slots * limit))
+    assert group_size(20, 2) == min(5, limit)  # 20 objects over 2 workers: 4 jobs of 5
     assert list(grouped(range(7), 3)) == [[0, 1, 2], [3, 4, 5], [6]]
     assert list(grouped([], 3)) == []
     got: list[list[int]] = []

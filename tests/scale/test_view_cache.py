@@ -78,14 +78,6 @@ def test_bad_input() -> None:
         ViewCache(dtype=torch.int8)
 
 
-def test_bench_pipeline_case_runs() -> None:
-    """The benchmark's whole-build case (flow + synthesis into the cache, exact Gram from it)."""
-    from torch_eigview.apps.bench_scaling import run_case
-
-    row = run_case({"kind": "pipeline", "objects": 3, "size": 32, "channels": 3, "k": 3, "max_views": 41})
-    assert row["passes"] > 1 and 0 < row["synthesis_s"] <= row["seconds"]
-
-
 def test_closed_cache_and_float16_overflow() -> None:
     cache = ViewCache(dtype=torch.float16)
     with pytest.raises(ValueError, match=r"views \(as torch.float16\) must be finite"):
