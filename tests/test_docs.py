@@ -25,10 +25,12 @@ API_PAGES = (
     "decomposition",
     "nn",
     "method",
+    "evaluation",
     "scale",
     "io",
     "datasets",
     "sklearn",
+    "config",
     "check",
 )
 
@@ -64,6 +66,14 @@ def test_every_example_is_shown() -> None:
     assert shown == {p.name for p in (ROOT / "examples").glob("*.py")}
 
 
+def test_result_pages_are_up_to_date() -> None:
+    """docs/results.md and docs/benchmarks.md are what the records under examples/ and
+    benchmarks/ give (``python docs/make_pages.py`` writes them)."""
+    argv = [sys.executable, str(DOCS / "make_pages.py"), "--check"]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr or proc.stdout
+
+
 def test_index_includes_readme_and_architecture() -> None:
     index = (DOCS / "index.md").read_text(encoding="utf-8")
     assert "```{include} ../README.md" in index
@@ -85,7 +95,9 @@ def test_build_without_warnings(tmp_path: Path) -> None:
     assert not missing, f"public names not in the API reference: {missing}"
     # The README's tables, the architecture page and the examples are pages of the site.
     index = (out / "index.html").read_text(encoding="utf-8")
-    assert "<table" in index and "Results: COIL-20" in index
+    assert "<table" in index and "COIL-20" in index
+    results = (out / "results.html").read_text(encoding="utf-8")
+    assert "<table" in results and "paper Fig. 4(b)" in results  # the generated results page
     assert "Import directions" in (out / "architecture.html").read_text(encoding="utf-8")
     examples = re.sub(r"<[^>]+>", "", (out / "examples.html").read_text(encoding="utf-8"))
     assert examples.count("def main(") == len(list((ROOT / "examples").glob("*.py")))

@@ -36,14 +36,8 @@ def test_script_imports(path: Path) -> None:
 
 
 COIL_EXAMPLES = [
-    "bench_correspondence",
-    "bench_eigen_solver",
-    "bench_synthesis",
     "reject_unknown",
-    "coil20_recognition",
-    "full_circle",
     "kernel_pca",
-    "pose_pair_choice",
     "train_frozen_features",
     "warp_augmentation",
 ]
@@ -73,66 +67,6 @@ def test_train_frozen_features(coil_root: Path) -> None:
     )
     assert result["accuracy"] >= 90.0
     assert result["compile_err"] < 1e-4 and result["dtype_err"] < 1e-4
-
-
-@pytest.mark.coil
-def test_bench_correspondence(coil_root: Path) -> None:
-    result = load("bench_correspondence").main(["--root", str(coil_root), "--objects", "1", "--alpha", "20"])
-    seconds = result["seconds_per_pair"]
-    assert set(seconds) == {"guided alpha=20", "tvl1 alpha=20", "tvl1-skimage alpha=20", "rows alpha=20"}
-    assert all(v > 0 for v in seconds.values())
-
-
-@pytest.mark.coil
-def test_bench_synthesis(coil_root: Path) -> None:
-    result = load("bench_synthesis").main(["--root", str(coil_root), "--objects", "3", "--workers", "2"])
-    assert (
-        result["views"] == 3 * 41 and result["seconds"]["threads"] > 0 and result["seconds"]["one thread"] > 0
-    )
-    assert result["same_views"]
-
-
-@pytest.mark.coil
-def test_bench_synthesis_framed(coil_root: Path) -> None:
-    # A margin round the object: the row band gives the whole grid's views.
-    args = ["--root", str(coil_root), "--objects", "2", "--workers", "2", "--frame", "0.5"]
-    banded = load("bench_synthesis").main(args)
-    assert banded["same_views"] and banded["same_as_whole_grid"]
-    assert banded["frame"] == 0.5 and not banded["whole_grid"]
-    whole = load("bench_synthesis").main([*args, "--whole-grid"])
-    assert whole["same_views"] and whole["same_as_whole_grid"] and whole["whole_grid"]
-
-
-@pytest.mark.coil
-def test_pose_pair_choice(coil_root: Path) -> None:
-    """The script's copy of the pair rule gives the library's poses (seed_pair_poses on the
-    same views and appearance poses)."""
-    import torch
-
-    from torch_eigview.datasets import CoilFolder
-    from torch_eigview.synthesis import SynthesisOptions, seed_pair_poses
-
-    result = load("pose_pair_choice").main(["--root", str(coil_root), "--objects", "1", "--every", "8"])
-    records, seeds = result["records"], result["seeds"]
-    assert len(records) >= 6  # 8 test poses of object 1, nearly all recognized
-    folder = CoilFolder(coil_root)
-    views = folder.images(1, [(seeds[0] + t) % 360 for t, _, _ in records])
-    rough = torch.tensor([seeds[0] + r for _, r, _ in records], dtype=torch.float64)
-    poses = seed_pair_poses(
-        views, rough, folder.images(1, seeds), seeds, closed=True, options=SynthesisOptions()
-    )
-    diff = (poses - torch.tensor(result["library_poses"], dtype=torch.float64) + 180) % 360 - 180
-    assert diff.abs().max() < 1e-6
-    assert {"library", "true sector (oracle)", "appearance"} <= set(result["rules"])
-
-
-@pytest.mark.coil
-def test_bench_eigen_solver(coil_root: Path) -> None:
-    """Three objects make 864 views, below SUBSPACE_MIN: "auto" runs the Gram path, and
-    both fits are one eigenspace."""
-    result = load("bench_eigen_solver").main(["--root", str(coil_root), "--objects", "3", "--rounds", "1"])
-    assert result["views"] == [4 * 3 * 72, 16384] and result["auto_ran"] == "gram"
-    assert result["max_principal_angle_rad"] < 1e-6 and all(result["seconds"]["auto"])
 
 
 @pytest.mark.coil

@@ -204,90 +204,19 @@ def test_bad_input() -> None:
         render("head", 0.0, OrthographicCamera(16))  # type: ignore[arg-type]
 
 
-def test_demo_small(tmp_path: object) -> None:
-    from torch_eigview.apps.demo import SyntheticScene, recognition_experiment
-
-    scene = SyntheticScene(shapes=("head", "cylinder"), camera=OrthographicCamera(32))
-    result = recognition_experiment(10.0, 2, scene=scene, correspondences="exact", test=(-10.0, 10.0))
-    assert result["n_test"] == 42 and result["n_gallery"] == 82
-    assert result["accuracy"] == 100.0
-
-
-@pytest.mark.slow
-def test_rendered_gallery_is_the_ceiling() -> None:
-    """``correspondences="rendered"``: the gallery is the rendered views at the gallery's
-    angles (no synthesis): its codes are those of the renders, not of synthesized views,
-    and test views at the gallery's angles are then recognized with their exact pose."""
-    from torch_eigview.apps.demo import SyntheticScene, recognition_experiment
-    from torch_eigview.evaluation.coil import angle_range
-
-    shapes = ("head", "cylinder")
-    scene = SyntheticScene(shapes=shapes, camera=OrthographicCamera(32))
-    result = recognition_experiment(10.0, 2, scene=scene, correspondences="rendered", test=(-20.0, 20.0))
-    assert result["n_gallery"] == 82 and result["accuracy"] == 100.0
-    assert result["pose_mae_deg"] == 0.0
-    rec = result["recognizer"]
-    assert isinstance(rec, torch.nn.Module)
-    renders = torch.cat([scene.views(n, angle_range(-20.0, 20.0, 1.0, name="t")) for n in shapes])
-    torch.testing.assert_close(rec.codes, rec.projection(renders))
-    synthesized = recognition_experiment(10.0, 2, scene=scene, correspondences="exact", test=(-20.0, 20.0))
-    other = synthesized["recognizer"]
-    assert isinstance(other, torch.nn.Module)
-    assert not torch.allclose(other.projection(renders), other.codes, atol=1e-3)
-    with pytest.raises(
-        ValueError, match=r"correspondences must be one of \('flow', 'exact', 'rendered'\), got 'true'"
-    ):
-        recognition_experiment(10.0, 2, scene=scene, correspondences="true")
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("camera", ["affine", "perspective"])
-def test_synth_protocol_per_camera(camera: str, capsys: pytest.CaptureFixture[str]) -> None:
-    """`eigview synth --camera`: Fig. 2's protocol with each camera model's synthesis."""
-    from torch_eigview.apps.demo import run_synth
-
-    out = run_synth(
-        camera, [10.0], [2], size=40, shapes=("egg", "cylinder"), test=(-20.0, 20.0), error_thetas=(-5.0, 4.0)
-    )
-    (record,) = out["results"]  # type: ignore[misc]
-    assert record["n_test"] == 82 and record["accuracy"] >= 95.0
-    errors = [e for errs in out["synthesis_error"].values() for e in errs]  # type: ignore[attr-defined]
-    assert len(errors) == 4 and max(errors) < 0.02
-    (ceiling,) = out["ceiling"]  # type: ignore[misc]
-    assert ceiling["correspondences"] == "rendered" and ceiling["n_gallery"] == record["n_gallery"]
-    printed = capsys.readouterr().out
-    assert f"camera model: {camera}" in printed and "per-pixel mean abs error" in printed
-    assert "ceiling: the same protocol with the rendered views" in printed
-
-
-def test_synth_cli_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
-    from torch_eigview.apps.cli import main
-
-    with pytest.raises(SystemExit) as info:
-        main(["synth", "--camera", "fisheye"])
-    assert info.value.code == 2 and "invalid choice: 'fisheye'" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as info:
-        main(["synth", "--shapes", "head,teapot"])
-    assert info.value.code == 2 and "--shapes has unknown shape(s) ['teapot']" in capsys.readouterr().err
-
-
-def test_demo_three_views_range_follows_the_seeds() -> None:
-    from torch_eigview.apps.demo import SyntheticScene, synthetic_gallery
-
-    scene = SyntheticScene(shapes=("egg",), camera=OrthographicCamera(24))
-    views, thetas = synthetic_gallery(scene, "egg", 10.0, 3, correspondences="exact")
-    assert thetas[0] == -25.0 and thetas[-1] == 25.0 and views.shape[0] == 51
-    # The seeds (-10, 0, 10) come out as rendered: each seed pair reproduces its own views.
-    seeds = scene.views("egg", [-10.0, 0.0, 10.0])
-    torch.testing.assert_close(views[[15, 25, 35]], seeds, rtol=0, atol=1e-5)
-
-
+@pytest.mark.parametrize("batch", [None, 1])
 @pytest.mark.parametrize("camera", [OrthographicCamera(24), PerspectiveCamera(24, distance=3.0)])
-def test_render_many_equals_render_at_each_angle(camera: object) -> None:
-    """The rays of all angles cast at once give every render bit for bit (NaN-free fields
-    compared as they are; the background's points are NaN in both)."""
+def test_render_many_equals_render_at_each_angle(
+    camera: object, batch: int | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The rays of all angles cast at once (the default march batch), or one angle a group
+    (a tiny one), give every render bit for bit (NaN-free fields compared as they are; the
+    background's points are NaN in both)."""
+    import torch_eigview._tuning as _tuning
     from torch_eigview.datasets.renderer import render_many
 
+    if batch is not None:
+        monkeypatch.setattr(_tuning, "MARCH_BATCH", batch)
     thetas = [0.0, 12.5, -40.0, 181.0, 12.5]
     for name in ("head", "cylinder"):
         obj = make_object(name)

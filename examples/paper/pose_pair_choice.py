@@ -4,10 +4,9 @@
 against the seed pair whose sector holds its appearance pose (the pose interpolated on the
 eigenspace's manifold), and against the neighbouring pair where Eq. 2 puts it past a seed
 (:func:`~torch_eigview.synthesis.seed_pair_poses`). Here every such view is measured
-against three pairs: its appearance sector's and both neighbours' (two flows each,
-:func:`~torch_eigview.geometry.view_pose.chain_columns` and
-:func:`~torch_eigview.geometry.view_pose.fit_view_angle`, as the library does), and the
-pose error of several ways to choose among them is printed:
+against three pairs: its appearance sector's and both neighbours' (two flows each, the
+points chained through the view and Eq. 2 fitted to their columns as the library does,
+``pose_fit.py``), and the pose error of several ways to choose among them is printed:
 
 - ``library``: the library's rule, from the same measurements (it reproduces the command's
   pose errors);
@@ -20,9 +19,9 @@ pose error of several ways to choose among them is printed:
 - ``appearance``: the appearance pose itself, no geometry.
 
 This prints figures, it is not a test. It reads the test views' true poses; a diagnosis, not
-a method. About 20 minutes on two CPU cores for 20 objects:
+a method. It takes about a minute per object on two CPU cores:
 
-``python examples/pose_pair_choice.py [--root ../shared/data/coil-20-proc] [--seeds 8] [--objects 1-20]``
+``python examples/paper/pose_pair_choice.py [--root DIR] [--seeds 8] [--objects 1-20]``
 """
 
 from __future__ import annotations
@@ -32,20 +31,26 @@ import math
 import statistics
 import warnings
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import torch
+from pose_fit import MIN_POINTS, chain_columns, column_weight, fit_view_angle, wrap_degrees
+from record import (
+    add_objects_flag,
+    add_record_flag,
+    add_root_flag,
+    check_record,
+    coil_folder,
+    command_line,
+    table,
+    write_record,
+)
 
-from torch_eigview.apps.cli_args import objects_arg
-from torch_eigview.evaluation.coil import CoilExperiment
-from torch_eigview.datasets import CoilFolder, find_coil_root
-from torch_eigview.geometry.angles import wrap_degrees
-from torch_eigview.geometry.flow import estimate_correspondence
-from torch_eigview.geometry.view_pose import MIN_POINTS, chain_columns, fit_view_angle
+from torch_eigview import estimate_correspondence
+from torch_eigview.evaluation import CoilExperiment
 from torch_eigview.scale import available_cpus, threads
-from torch_eigview.scale.parallel import map_ordered
 from torch_eigview.synthesis import ElevationFallbackWarning, SynthesisOptions
-from torch_eigview.synthesis.view_pose import _column_weight  # view_angles' point weight
-from torch_eigview.warp.normalize import seed_foreground
+from torch_eigview.warp import foreground_mask
 
 Measure = dict[str, float]  # theta (degrees from the pair's first seed), points, trusted
 
@@ -53,7 +58,7 @@ Measure = dict[str, float]  # theta (degrees from the pair's first seed), points
 def measure(views: torch.Tensor, two: torch.Tensor, alpha: float, opts: SynthesisOptions) -> list[Measure]:
     """:func:`~torch_eigview.synthesis.view_angles` of (N, C, H, W) ``views`` between ``two``
     seeds, with the chained points it fits and the shares of the view each flow trusts."""
-    fg = seed_foreground(two[:1], None, opts.background)[0]
+    fg = foreground_mask(two[:1], opts.background)[0]
     kwargs = opts.flow_kwargs(alpha / 2)
     to_view = estimate_correspondence(
         two[:1].expand_as(views), views, method=opts.flow, threshold=opts.threshold, **kwargs
@@ -62,7 +67,7 @@ def measure(views: torch.Tensor, two: torch.Tensor, alpha: float, opts: Synthesi
         views, two[1:].expand_as(views), method=opts.flow, threshold=opts.threshold, **kwargs
     )
     x1, x2, x3, use = chain_columns(to_view, to_seed2, fg)
-    weight = _column_weight(two[0])
+    weight = column_weight(two[0])
     theta = fit_view_angle(x1, x2, x3, use, alpha, weight=weight)
     points = (use & (weight > 0)).sum(dim=1)
     trusted = to_view.valid_12.double().mean((1, 2)) * to_seed2.valid_12.double().mean((1, 2))
@@ -74,18 +79,14 @@ def measure(views: torch.Tensor, two: torch.Tensor, alpha: float, opts: Synthesi
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--root",
-        help="the COIL-20 folder (default: coil-20-proc/ in $TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc)",
-    )
+    add_root_flag(parser)
     parser.add_argument("--seeds", type=int, default=8, help="M, seeds round the circle (>= 3)")
-    parser.add_argument("--objects", type=objects_arg, default=None, help="e.g. 1-20 or 1,3,5-7")
+    add_objects_flag(parser)
     parser.add_argument("--every", type=int, default=1, help="measure every N-th test pose (a quick look)")
+    add_record_flag(parser, "pose_pair_choice")
     args = parser.parse_args(argv)
-    try:  # a missing folder: say where the images go, not a traceback
-        folder = CoilFolder(find_coil_root(args.root))
-    except ValueError as exc:
-        parser.error(str(exc))
+    check_record(parser, args.record)
+    folder = coil_folder(parser, args.root)
     if args.seeds < 3:
         parser.error(f"--seeds must be >= 3 (seeds 180 degrees apart leave Eq. 2 singular), got {args.seeds}")
     if args.every < 1:
@@ -119,12 +120,9 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         truth = [tests[i] - seeds[0] for i in ok.tolist()]
         return [(truth[i], rough[i], {off: found[(i, off)] for off in (-1, 0, 1)}) for i in range(len(ok))]
 
-    with threads(1):
-        records = [
-            r
-            for part in map_ordered(one, [(o,) for o in objects], available_cpus(), kind="thread")
-            for r in part
-        ]
+    # One object per thread, one torch thread each (the flows release the GIL), in order.
+    with threads(1), ThreadPoolExecutor(available_cpus()) as pool:
+        records = [r for part in pool.map(one, objects) for r in part]
 
     def pose(meas: Measure) -> float:
         return meas["base"] + meas["theta"]
@@ -176,22 +174,39 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         f"{MIN_POINTS} trusted points in the appearance pair (they keep the appearance pose)"
     )
     print(f"{'rule':50s} {'mean':>7s} {'median':>7s} {'> 20 deg':>9s}")
-    table: dict[str, dict[str, float]] = {}
+    summary: dict[str, dict[str, float]] = {}
     for name, rule in rules.items():
         errors = (
             wrap_degrees(torch.tensor([rule(t, r, c) - t for t, r, c in records], dtype=torch.float64))
             .abs()
             .tolist()
         )
-        row = table[name] = {
+        row = summary[name] = {
             "mean": statistics.fmean(errors),
             "median": statistics.median(errors),
             "over_20": sum(e > 20 for e in errors),
         }
         print(f"{name:50s} {row['mean']:7.2f} {row['median']:7.2f} {row['over_20']:9d}")
     library_poses = [(seeds[0] + library(r, c)) % 360.0 for _, r, c in records]
-    return {"rules": table, "records": records, "library_poses": library_poses, "seeds": seeds}
+    write_record(
+        args.record,
+        title="Which seed pair measures a view's pose (the geometric pose's pair rule)",
+        command=command_line(__file__, argv),
+        tables=[
+            table(
+                f"M = {m}, {len(records)} recognized views of {len(objects)} objects, each measured against "
+                "three seed pairs (its appearance sector's and both neighbours'); the pose error (degrees) of "
+                f"each way to choose among them. {few} views have fewer than {MIN_POINTS} trusted points in "
+                "the appearance pair and keep the appearance pose.",
+                ["rule", "mean", "median", "views > 20°"],
+                [[name, row["mean"], row["median"], row["over_20"]] for name, row in summary.items()],
+            )
+        ],
+        rules=summary,
+    )
+    return {"rules": summary, "records": records, "library_poses": library_poses, "seeds": seeds}
 
 
 if __name__ == "__main__":
-    main()
+    with threads():  # the commands' thread policy: one intra-op thread, idle CPUs for the eigen step
+        main()

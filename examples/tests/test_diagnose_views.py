@@ -1,21 +1,18 @@
-"""The views table of the diagnosis tool: its figures on crafted sequences whose answers
-are known, on rendered shapes, on COIL-20, and its bad arguments."""
+"""The views diagnosis (``examples/diagnostics/diagnose_views.py``): its figures on crafted
+sequences whose answers are known, on rendered shapes, on COIL-20, and its bad arguments."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
+import diagnose_views
 import pytest
 import torch
+from diagnose_views import main, pair_view_stats, view_gain_rows
 
-from torch_eigview.apps import diagnose_views
-from torch_eigview.apps.diagnose import TABLES, main
-from torch_eigview.apps.diagnose_views import pair_view_stats, view_gain_table
-from torch_eigview.datasets.cameras import OrthographicCamera
-from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.datasets.renderer import render_views
-from torch_eigview.datasets.shapes import make_object
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews
+from torch_eigview import SynthesisOptions, SynthesizedViews
+from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 
 
 def _bump(angle: float) -> torch.Tensor:
@@ -85,53 +82,47 @@ def test_rendered_pair_synthesis_comes_nearer_than_the_seeds() -> None:
     assert 1.0 <= jump < 5.0
 
 
-@pytest.mark.slow
-def test_table_on_coil(folder: CoilFolder) -> None:
+def test_table_on_coil(coil_root: Path, tmp_path: Path) -> None:
     """On two COIL-20 objects the synthesis gains much at 10° and far less at 45°."""
-    table = view_gain_table(folder, [1, 3], [0.0], [10.0, 45.0], variants={"default": {}})
-    rows = [line.split() for line in table.splitlines()[2:]]
-    assert [r[0] for r in rows] == ["10", "45"]
-    gain = {r[0]: float(r[5]) for r in rows}
-    assert gain["10"] > 0.2 and gain["45"] < gain["10"] - 0.2, table
-    assert rows[0][7] == "-"  # α = 10: the one real view between the seeds is midway
-    assert int(rows[1][2]) == 2 * 8  # two objects, eight views between seeds 45° apart
+    argv = ["--root", str(coil_root), "--objects", "1,3", "--centers", "0", "--alphas", "10", "45"]
+    rows = main([*argv, "--record", str(tmp_path / "r.json")])
+    default = [row for row in rows if row[1] == "default"]
+    assert [r[0] for r in default] == [10.0, 45.0]
+    gain = {r[0]: float(r[5]) for r in default}
+    assert gain[10.0] > 0.2 and gain[45.0] < gain[10.0] - 0.2, rows
+    assert default[0][7] is None  # α = 10: the one real view between the seeds is midway
+    assert default[1][2] == 2 * 8  # two objects, eight views between seeds 45° apart
+    assert (tmp_path / "r.json").is_file()
 
 
 @pytest.mark.parametrize("alpha", [7.0, 5.0, 0.0, -10.0])
 def test_table_rejects_angles_without_a_view_between_seeds(alpha: float) -> None:
     with pytest.raises(ValueError, match=rf"alpha={alpha:g} must be a multiple of the poses' step 5"):
-        view_gain_table(None, [1], [0.0], [alpha])  # type: ignore[arg-type]
+        view_gain_rows(None, [1], [0.0], [alpha])  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("step", [2.5, 0.0, -5.0])
 def test_table_rejects_a_step_that_is_not_whole_degrees(step: float) -> None:
     with pytest.raises(ValueError, match=rf"step={step:g} must be a positive whole number of degrees"):
-        view_gain_table(None, [1], [0.0], [10.0], step=step)  # type: ignore[arg-type]
+        view_gain_rows(None, [1], [0.0], [10.0], step=step)  # type: ignore[arg-type]
 
 
 def test_table_needs_objects_centers_angles_and_variants() -> None:
     with pytest.raises(ValueError, match="must each name at least one"):
-        view_gain_table(None, [1], [0.0], [10.0], variants={})  # type: ignore[arg-type]
+        view_gain_rows(None, [1], [0.0], [10.0], variants={})  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="must each name at least one"):
-        view_gain_table(None, [], [0.0], [10.0])  # type: ignore[arg-type]
+        view_gain_rows(None, [], [0.0], [10.0])  # type: ignore[arg-type]
 
 
-def test_cli_lists_the_views_table(capsys: pytest.CaptureFixture[str]) -> None:
-    assert "views" in TABLES
-    with pytest.raises(SystemExit):
-        main(["--help"])
-    assert "--view-alphas" in capsys.readouterr().out
-
-
-def test_cli_bad_angle_is_one_line(capsys: pytest.CaptureFixture[str], coil_root) -> None:  # type: ignore[no-untyped-def]
+def test_cli_bad_angle_is_one_line(capsys: pytest.CaptureFixture[str], coil_root: Path) -> None:
     with pytest.raises(SystemExit) as exc:
-        main(["views", "--root", str(coil_root), "--objects", "1", "--view-alphas", "7"])
+        main(["--root", str(coil_root), "--objects", "1", "--alphas", "7", "--record", ""])
     assert exc.value.code == 2
     assert "alpha=7 must be a multiple of the poses' step 5" in capsys.readouterr().err
 
 
-def test_cli_missing_folder_is_one_line(capsys: pytest.CaptureFixture[str], tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_cli_missing_folder_is_one_line(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as exc:
-        main(["views", "--root", str(tmp_path / "absent")])
+        main(["--root", str(tmp_path / "absent"), "--record", ""])
     assert exc.value.code == 2
     assert "absent" in capsys.readouterr().err

@@ -1,21 +1,20 @@
-"""The chained-motion diagnosis: its geometry against the chained motion itself, the full
-circle's geometry parameter, the experiment against ``eigview coil``'s with the same
-geometry, the table on COIL-20 and bad seed poses."""
+"""The chained-motion diagnosis (``examples/diagnostics/diagnose_chained.py``): its geometry
+against the chained motion itself, the full circle's geometry parameter, the experiment
+against ``eigview coil``'s with the same geometry, the table on COIL-20 and bad seed poses."""
 
 from __future__ import annotations
 
-import dataclasses
+from pathlib import Path
 
+import diagnose_chained
 import pytest
 import torch
+from diagnose_chained import chained_geometry, main, run_with_geometry
+from diagnose_flow import chained_disparity
 
-from torch_eigview.apps import diagnose_chained
-from torch_eigview.apps.diagnose import TABLES
-from torch_eigview.apps.diagnose_chained import ChainedExperiment, chained_geometry, chained_table
-from torch_eigview.apps.diagnose_flow import chained_disparity
-from torch_eigview.datasets.coil import CoilFolder
-from torch_eigview.evaluation.coil import CoilExperiment
-from torch_eigview.synthesis import SynthesisOptions, pair_geometry, synthesize_circle
+from torch_eigview import CoilFolder, SynthesisOptions
+from torch_eigview.evaluation import CoilExperiment
+from torch_eigview.synthesis import pair_geometry, synthesize_circle
 
 
 def test_geometry_is_the_chained_motion(folder: CoilFolder) -> None:
@@ -35,13 +34,14 @@ def test_geometry_is_the_chained_motion(folder: CoilFolder) -> None:
 @pytest.mark.parametrize(
     ("poses", "closed", "pair", "chain", "angle"),
     [
-        # The closing pair of a circle from 90°: 270° round through 360° to 0°.
-        ([90.0, 180.0, 270.0, 0.0], True, 2, [270.0 + 5.0 * i for i in range(18)] + [0.0], 90.0),
-        ([0.0, 90.0, 180.0, 270.0], True, 3, [270.0 + 5.0 * i for i in range(18)] + [0.0], 90.0),
+        # A pair across 0°: from 340° round through 360° to 10°.
+        ([340.0, 10.0], False, 0, [340.0, 345.0, 350.0, 355.0, 0.0, 5.0, 10.0], 30.0),
+        # The closing pair of a loop: from the last seed, 350°, round to the first, 0°.
+        ([0.0, 10.0, 350.0], True, 2, [350.0, 355.0, 0.0], 10.0),
         # A negative α: from 0° down through 355°.
         ([0.0, -10.0], False, 0, [0.0, 355.0, 350.0], -10.0),
     ],
-    ids=["circle-from-90", "closing-pair", "negative-alpha"],
+    ids=["across-0", "closing-pair", "negative-alpha"],
 )
 def test_pairs_chain_the_short_way_round(
     folder: CoilFolder,
@@ -85,7 +85,8 @@ def test_bad_seed_poses_named(folder: CoilFolder, poses: list[float], match: str
 
 def test_circle_geometry_parameter(folder: CoilFolder) -> None:
     """The full circle from precomputed geometry gives the views it measures itself."""
-    seeds = folder.images(2, [0.0, 90.0, 180.0, 270.0])
+    # Half-size views: the geometry's route through the synthesis is what is checked.
+    seeds = torch.nn.functional.avg_pool2d(folder.images(2, [0.0, 90.0, 180.0, 270.0]), 2)
     opts = SynthesisOptions()
     geometry = [pair_geometry(seeds[[k, (k + 1) % 4]], 90.0, opts)[0] for k in range(4)]
     own = synthesize_circle(seeds, 20.0, opts)
@@ -95,13 +96,19 @@ def test_circle_geometry_parameter(folder: CoilFolder) -> None:
         synthesize_circle(seeds, 20.0, opts, geometry=geometry[:2])
 
 
-@pytest.mark.slow
+@pytest.mark.parametrize(
+    "base",
+    [
+        CoilExperiment(alpha=10.0, center=90.0, objects=[1, 3], synth=(-10.0, 10.0, 5.0), components=5),
+        CoilExperiment(seeds=4, objects=[3], synth=(0.0, 0.0, 30.0), interpolate_pose=True, components=3),
+    ],
+    ids=["center-90", "circle"],
+)
 def test_experiment_with_the_flows_geometry_is_eigview_coils(
-    folder: CoilFolder, monkeypatch: pytest.MonkeyPatch
+    folder: CoilFolder, base: CoilExperiment
 ) -> None:
     """Given the default flow's geometry instead of the chained motion, the experiment
     reproduces ``eigview coil``'s run exactly: its galleries differ in the geometry alone."""
-
     calls: list[int] = []
 
     def flow_geometry(folder, obj, poses, options, *, closed=False, step=5.0):  # type: ignore[no-untyped-def]
@@ -111,27 +118,18 @@ def test_experiment_with_the_flows_geometry_is_eigview_coils(
         alpha = (poses[1] - poses[0]) % 360.0
         return [pair_geometry(seeds[[i, j]], alpha, options)[0] for i, j in pairs]
 
-    monkeypatch.setattr(diagnose_chained, "chained_geometry", flow_geometry)
-    for base in (
-        CoilExperiment(alpha=10.0, center=90.0, objects=[1, 3], synth=(-10.0, 10.0, 5.0), components=5),
-        CoilExperiment(seeds=4, objects=[1, 3], synth=(0.0, 0.0, 15.0), interpolate_pose=True, components=5),
-    ):
-        fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
-        calls.clear()
-        ours, theirs = ChainedExperiment(**fields).run(folder), base.run(folder)
-        assert calls == [1, 3]  # the galleries came from the geometry given
-        assert ours.accuracy == theirs.accuracy and ours.per_object == theirs.per_object
-        assert ours.pose_mae_deg == theirs.pose_mae_deg
-        assert ours.n_train_views == theirs.n_train_views
+    ours, n_gallery = run_with_geometry(base, folder, flow_geometry)
+    theirs = base.run(folder)
+    assert calls == list(base.objects)  # the galleries came from the geometry given
+    assert ours.accuracy == theirs.accuracy and ours.per_object == theirs.per_object
+    assert ours.pose_mae_deg == theirs.pose_mae_deg and ours.pose_median_deg == theirs.pose_median_deg
+    assert n_gallery == theirs.n_train_views
 
 
-@pytest.mark.slow
-def test_table_on_coil(folder: CoilFolder) -> None:
-    """Two objects, one center and M = 4: a row each, accuracies in [0, 100]."""
-    assert "chained" in TABLES
-    table = chained_table(folder, [1, 3], [0.0], 10.0, [4], 5, 5, step=15.0)
-    lines = table.splitlines()
-    assert lines[1].split() == ["flow", "chained", "dense", "pose", "md", "chained"]
-    rows = {" ".join(line.split()[:-5]): [float(v) for v in line.split()[-5:]] for line in lines[2:]}
-    assert list(rows) == ["center 0", "M = 4"]
-    assert all(0.0 <= v <= 100.0 for row in rows.values() for v in row[:3])
+def test_table_on_coil(coil_root: Path, tmp_path: Path) -> None:
+    """Two objects, one center (no full circle: its chains are long): one row, accuracies in [0, 100]."""
+    argv = ["--root", str(coil_root), "--objects", "1,3", "--centers", "90", "--seeds"]
+    rows = main([*argv, "--components", "5", "--record", str(tmp_path / "r.json")])
+    assert [row[0] for row in rows] == ["center 90"]
+    assert all(0.0 <= v <= 100.0 for row in rows for v in row[1:4])
+    assert (tmp_path / "r.json").is_file()
