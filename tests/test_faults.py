@@ -199,15 +199,12 @@ def test_export_refuses_a_corrupted_model(tmp_path: Path, capsys: pytest.Capture
 # (command line before the flag, the output flag). Each run would take from seconds to hours;
 # a bad output path must stop it before any of that work.
 _OUTPUTS = [
-    (["coil", "--root", "{tmp}", "--alpha", "5"], "--json"),
-    (["coil", "--root", "{tmp}", "--alpha", "5"], "--save"),
+    (["coil", "--folder", "{tmp}", "--alpha", "5"], "--json"),
+    (["coil", "--folder", "{tmp}", "--alpha", "5"], "--save"),
     (["demo", "--png", ""], "--json"),
     (["demo"], "--png"),
-    (["synth"], "--json"),
     (["export", "--model", "{tmp}/model.pt"], "--out"),
     (["predict", "--onnx", "{tmp}/m.onnx", "{tmp}/a.png"], "--json"),
-    (["bench", "--quick"], "--json"),
-    (["bench", "--quick"], "--png"),
 ]
 _BAD = {
     "directory": ("{tmp}", "is a directory"),
@@ -249,7 +246,7 @@ def test_output_equal_to_an_input_is_refused(tmp_path: Path, capsys: pytest.Capt
     assert "is the same file as IMAGE" in capsys.readouterr().err and image.read_bytes() == b"png"
     json_path = str(tmp_path / "r.out")
     assert (
-        _exit(["coil", "--root", str(tmp_path), "--alpha", "5", "--json", json_path, "--save", json_path])
+        _exit(["coil", "--folder", str(tmp_path), "--alpha", "5", "--json", json_path, "--save", json_path])
         == 2
     )
     assert "name the same file" in capsys.readouterr().err

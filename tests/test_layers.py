@@ -14,7 +14,8 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "torch_eigview"
 
-# unit -> the units it may import (besides itself). "base" is errors.py, check.py, lazy.py and files.py.
+# unit -> the units it may import (besides itself). "base" is errors.py, check.py, lazy.py,
+# files.py, environment.py and _tuning.py.
 ALLOWED: dict[str, set[str]] = {
     "base": set(),
     "geometry": {"base"},
@@ -57,12 +58,15 @@ ALLOWED: dict[str, set[str]] = {
 
 
 def _unit(module: str) -> str:
-    """'torch_eigview.warp.operator' -> 'warp'; errors, check, lazy and files are the base layer."""
+    """'torch_eigview.warp.operator' -> 'warp'; errors, check, lazy, files, environment,
+    config and _tuning are the base layer. ``_tuning`` is private to the package, not to a subpackage:
+    every layer imports it as a module (``import torch_eigview._tuning as _tuning``) and
+    reads its values at call time, so that a test can patch them."""
     parts = module.split(".")
     if len(parts) == 1:
         return "root"
     head = parts[1]
-    if head in ("errors", "check", "lazy", "files", "environment"):
+    if head in ("errors", "check", "lazy", "files", "environment", "config", "_tuning"):
         return "base"
     if head in ("__init__", "__main__"):
         return "root"
@@ -136,3 +140,11 @@ def test_no_private_name_crosses_a_subpackage(path: Path) -> None:
 def test_the_table_names_every_subpackage() -> None:
     units = {_unit(_module_name(p)) for p in MODULES}
     assert units <= set(ALLOWED), f"subpackages without a layer: {units - set(ALLOWED)}"
+
+
+def test_the_architecture_page_draws_this_table() -> None:
+    """docs/architecture.md's import table is this one: the page stays true."""
+    page = (PACKAGE.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    block = page.split("```python\n", 1)[1].split("```", 1)[0]
+    drawn = ast.literal_eval(block.split("=", 1)[1].strip())
+    assert drawn == ALLOWED

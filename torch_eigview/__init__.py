@@ -12,12 +12,13 @@ The top level holds the core names; everything else is imported from its subpack
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING
 
+from torch_eigview.environment import package_version
 from torch_eigview.lazy import attach
 
 if TYPE_CHECKING:
+    from torch_eigview.config import config_context, get_config, set_config
     from torch_eigview.datasets.coil import CoilFolder
     from torch_eigview.decomposition.eigenspace import Eigenspace
     from torch_eigview.decomposition.kernel import KernelEigenspace
@@ -37,10 +38,7 @@ if TYPE_CHECKING:
     from torch_eigview.warp.operator import SparseViewOperator
     from torch_eigview.warp.perspective import PerspectiveWarp
 
-try:
-    __version__ = version("torch_eigview")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0+unknown"
+__version__ = package_version()
 
 # Public name -> the submodule that defines it.
 _SOURCES = {
@@ -60,6 +58,9 @@ _SOURCES = {
     "SynthesisOptions": "synthesis",
     "SynthesizedViews": "synthesis",
     "affine_coefficients": "geometry.pose",
+    "config_context": "config",
+    "get_config": "config",
+    "set_config": "config",
     "environment_info": "environment",
     "estimate_correspondence": "geometry.flow",
     "estimate_elevation": "geometry.pose",
@@ -86,12 +87,15 @@ __all__ = [
     "SynthesisOptions",
     "SynthesizedViews",
     "affine_coefficients",
+    "config_context",
     "environment_info",
     "estimate_correspondence",
     "estimate_elevation",
+    "get_config",
     "load_recognizer",
     "orthographic_coefficients",
     "save_recognizer",
+    "set_config",
     "synthesize_views",
 ]
 

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 from collections.abc import Sequence
 
 import torch
+
+from torch_eigview.config import check_limit
 
 __all__ = [
     "as_angle_tensor",
@@ -31,7 +32,6 @@ __all__ = [
     "check_positive",
     "check_view_input",
     "check_view_pair",
-    "limit",
 ]
 
 
@@ -240,41 +240,9 @@ def check_positive(value: object, name: str, *, allow_zero: bool = False) -> flo
     return number
 
 
-#: Views synthesized per object (every 0.1 degree over the whole turn by default): the
-#: environment variable that raises the limit, and the limit.
-VIEW_LIMIT = ("EIGVIEW_MAX_VIEWS", 3600)
-#: Pixels per side of an image a view is resized to (the commands' ``--size``): a view is
-#: held as H x W floats per channel, many times over.
-SIDE_LIMIT = ("EIGVIEW_MAX_IMAGE_SIDE", 512)
-
-
-def limit(env: str, default: int) -> int:
-    """The limit named by the environment variable ``env`` (a positive int), else ``default``.
-
-    Limits bound the work an argument can ask for (views, pixels, objects); a caller that
-    means it raises them through the variable.
-    """
-    text = os.environ.get(env)
-    if text is None or text.strip() == "":
-        return default
-    try:
-        value = int(text)
-    except ValueError:
-        raise ValueError(f"environment variable {env}={text!r} must be a positive integer") from None
-    if value < 1:
-        raise ValueError(f"environment variable {env}={text!r} must be a positive integer")
-    return value
-
-
-def check_limit(count: float, name: str, what: str, env: str, default: int) -> None:
-    """Raises ValueError when ``count`` ``what`` (asked for by argument ``name``) exceed the
-    limit of :func:`limit`; the message says the limit and how to raise it."""
-    bound = limit(env, default)
-    if not count <= bound:  # NaN counts as over the limit
-        raise ValueError(
-            f"{name} asks for {count:.6g} {what}, more than the limit of {bound}; "
-            f"set the environment variable {env} to raise it"
-        )
+#: The limit on views per object, and on an image's side (:mod:`torch_eigview.config`).
+VIEW_LIMIT = "max_views"
+SIDE_LIMIT = "max_image_side"
 
 
 def check_magnitude(x: torch.Tensor, name: str, n_terms: int) -> None:

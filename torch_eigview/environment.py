@@ -19,7 +19,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-__all__ = ["environment_info"]
+__all__ = ["environment_info", "package_version"]
 
 #: The distributions whose versions :func:`environment_info` reports.
 PACKAGES = (
@@ -34,6 +34,15 @@ PACKAGES = (
     "onnxscript",
     "scikit-learn",
 )
+
+
+def package_version() -> str:
+    """This package's installed version, or ``"0+unknown"`` in a source tree that was never
+    installed."""
+    try:
+        return version("torch_eigview")
+    except PackageNotFoundError:
+        return "0+unknown"
 
 
 def _cpu_model() -> str:

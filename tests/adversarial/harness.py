@@ -1,14 +1,23 @@
-"""How an adversarial case is run and judged: one bad input, one expected clear error.
+"""How an adversarial case is run and judged: one bad input, one expected clear error; one
+good input, one right answer.
 
 A :class:`Case` calls one entry point with one bad input. Its outcome is one of
 
-- ``clear``: a ValueError or TypeError (for the command: exit status 2 and a message on
-  stderr) whose message matches the case's pattern, which names the argument or file, the
-  constraint and the value given;
+- ``clear``: a ValueError or TypeError whose message matches the case's pattern, or for the
+  command a non-zero exit status whose error lines on stderr match it (:func:`error_lines`:
+  the ``eigview: error: ...`` lines, argparse's final ``eigview <cmd>: error: ...`` line,
+  never the usage text, a warning or a progress line). Every pattern names what is wrong
+  (the argument, flag or file) and the cause (``--threads.*must be.*>= ?1``), never only a
+  file name or a type;
 - ``unhelpful``: any other exception (a raw traceback), or a message that does not match;
 - ``hang``: no answer within :data:`TIMEOUT` seconds;
 - ``silent``: no error at all, or a result that is not finite;
 - ``lost``: the case's own check of the files it wrote failed (data destroyed).
+
+A :class:`Good` calls one entry point with one valid input (a ``--threads 1`` run, a valid
+manifest), which must succeed with a sane answer: ``right``, or ``wrong`` for an error, a
+hang or an answer its check refuses (:func:`judge`). A validation that refuses good input
+is as much a fault as one that lets bad input through.
 
 ``python -m tests.adversarial.tally`` prints the tally of every case.
 """
@@ -20,7 +29,7 @@ import io
 import math
 import re
 import signal
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,8 +42,63 @@ from torch_eigview.apps.cli import main
 TIMEOUT = 20
 
 
+# Patterns several modules share: each names what is wrong and the cause.
+
+#: ``-k/--components VALUE`` refused by argparse (``.format(value)``, the value as a regex).
+COMPONENTS = r"--components must be an int >= ?1 or a fraction in \(0, 1\), got '{}'"
+#: A model file that torch cannot read: the cause, after the file's name.
+DAMAGED = r"could not be read as a torch_eigview model \((damaged|truncated)"
+#: A file that is not image data, and an empty one: the cause, not imageio's lack of a plugin.
+NOT_AN_IMAGE = r"(is not an? (\w+ )?image|not (PNG|image) data|damaged|corrupt|unknown (image )?format)"
+EMPTY = r"(is empty|0 bytes|empty file)"
+
+
+def threads_error(value: str) -> str:
+    """The error expected for ``--threads VALUE``: the flag, the bound 1 and the value."""
+    return rf"--threads\b.*must be .*>= ?1.*'{re.escape(value)}'"
+
+
 class CommandError(Exception):
-    """The command exited with status 2; the message is what it printed on stderr."""
+    """The command exited with a non-zero status; ``stderr`` is what it printed there."""
+
+    def __init__(self, status: object, stderr: str) -> None:
+        super().__init__(f"exit status {status}: {stderr}")
+        self.status = status
+        self.stderr = stderr
+
+
+@dataclass(frozen=True)
+class Ran:
+    """What a command that exited with status 0 printed."""
+
+    stdout: str
+    stderr: str
+
+
+#: The start of an error line: ``eigview: error: `` (the command's handler), ``eigview fit:
+#: error: `` (argparse, after its usage text), ``eigview predict: error: `` (one image).
+_ERROR_LINE = re.compile(r"^eigview(?: [\w-]+)?: error: ")
+#: A line of the command's own that is not part of an error message (a warning, a summary).
+_OWN_LINE = re.compile(r"^eigview(?: [\w-]+)?: ")
+
+
+def error_lines(stderr: str) -> str:
+    """The error messages a command printed on ``stderr``, one a line, without their
+    ``eigview...: error:`` prefix: the usage text before argparse's error, warnings, progress
+    and summary lines left out. A message that runs over several lines (a library's text
+    quoted in it) keeps its following lines up to the next line of the command's own."""
+    messages: list[list[str]] = []
+    inside = False
+    for line in stderr.splitlines():
+        start = _ERROR_LINE.match(line)
+        if start:
+            messages.append([line[start.end() :]])
+            inside = True
+        elif _OWN_LINE.match(line) or line.startswith("usage:"):
+            inside = False
+        elif inside:
+            messages[-1].append(line)
+    return "\n".join("\n".join(m) for m in messages)
 
 
 class LostData(AssertionError):
@@ -57,22 +121,40 @@ class Case:
     #: The exception types that count as a clear answer (torch's ``load_state_dict``
     #: reports a size mismatch as a RuntimeError, its own convention).
     errors: tuple[type[Exception], ...] = (ValueError, TypeError)
+    #: Where the package's message does not say the cause yet: what it should say. The
+    #: case is then expected not to be clear (a strict xfail in :func:`params`), so that
+    #: the fix of the message shows as a test to update.
+    todo: str = ""
+
+
+def params(cases: Sequence[Case | Good]) -> list[Any]:
+    """``cases`` as pytest parameters named by their ids, a case with a ``todo`` marked as
+    a strict xfail that gives it as the reason."""
+    import pytest
+
+    return [
+        pytest.param(c, id=c.id, marks=pytest.mark.xfail(strict=True, reason=c.todo))
+        if getattr(c, "todo", "")
+        else pytest.param(c, id=c.id)
+        for c in cases
+    ]
 
 
 def command(*argv: str, setup: Callable[[Path], object] | None = None) -> Callable[[Path], object]:
     """A case that runs ``eigview`` with ``argv`` (``{tmp}`` is the case's folder, which
-    ``setup`` fills first); a non-zero exit status raises :class:`CommandError`."""
+    ``setup`` fills first); a non-zero exit status raises :class:`CommandError`, status 0
+    returns what it printed (:class:`Ran`)."""
 
     def body(tmp: Path) -> object:
-        err = io.StringIO()
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
             try:
                 status = main([a.format(tmp=tmp) for a in argv])
             except SystemExit as exc:
                 status = exc.code  # type: ignore[assignment]
         if status:
-            raise CommandError(f"exit status {status}: {err.getvalue()}")
-        return status
+            raise CommandError(status, err.getvalue())
+        return Ran(out.getvalue(), err.getvalue())
 
     def run(tmp: Path) -> object:
         if setup is not None:
@@ -148,9 +230,40 @@ def outcome(case: Case, tmp: Path) -> tuple[str, str]:
     except LostData as exc:
         return "lost", str(exc)
     except Exception as exc:  # any other exception is the finding
-        message = str(exc)
+        message = error_lines(exc.stderr) if isinstance(exc, CommandError) else str(exc)
         expected = isinstance(exc, (*case.errors, CommandError))
-        if expected and re.search(case.match, message, flags=re.DOTALL) and "Traceback" not in message:
+        if expected and re.search(case.match, message, flags=re.DOTALL) and "Traceback" not in str(exc):
             return "clear", message
-        return "unhelpful", f"{type(exc).__name__}: {message}"
+        if isinstance(exc, CommandError) and message:  # the error lines, not the usage text
+            return "unhelpful", f"CommandError: exit status {exc.status}: {message}"
+        return "unhelpful", f"{type(exc).__name__}: {exc}"
     return "silent", f"no error; returned {out!r:.200}" if _finite(out) else "non-finite result"
+
+
+@dataclass(frozen=True)
+class Good:
+    """One good input: ``run(tmp)`` calls an entry point, which must succeed; ``check(out,
+    tmp)`` says whether its answer ``out`` is right (False, or an AssertionError whose
+    message says what is wrong, when it is not)."""
+
+    id: str
+    run: Callable[[Path], object]
+    check: Callable[[Any, Path], bool]
+
+
+def judge(good: Good, tmp: Path) -> tuple[str, str]:
+    """(``right`` or ``wrong``, what happened) for one good input run in the empty folder ``tmp``."""
+    try:
+        with deadline():
+            out = good.run(tmp)
+    except (Expired, TimeoutError) as exc:
+        return "wrong", str(exc)
+    except CommandError as exc:  # a refused good input is the finding
+        return "wrong", f"CommandError: exit status {exc.status}: {error_lines(exc.stderr) or exc.stderr}"
+    except Exception as exc:
+        return "wrong", f"{type(exc).__name__}: {exc}"
+    try:
+        right = good.check(out, tmp) and _finite(out)
+    except AssertionError as exc:
+        return "wrong", f"{exc}; returned {out!r:.200}"
+    return ("right", f"{out!r:.200}") if right else ("wrong", f"returned {out!r:.200}")

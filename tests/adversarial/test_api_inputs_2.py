@@ -2,7 +2,7 @@
 masks, backgrounds, the foreground estimate, the preprocessing record): each must raise
 ValueError or TypeError naming the argument, the constraint and the value, never another
 exception, a hang or a silent result (manifests: test_manifest_inputs.py; the method:
-test_api_inputs_3.py).
+test_api_inputs_3.py). Good input (``GOOD``) must be answered right.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from torch_eigview.io.foreground import estimate_foreground
 from torch_eigview.io.preprocessing import Preprocessing, prepare_array
 
 from tests.adversarial import files, views
-from tests.adversarial.harness import Case, outcome
+from tests.adversarial.harness import Case, Good, judge, outcome, params
 
 IMAGES = torch.rand(2, 3, 8, 8, generator=torch.Generator().manual_seed(0))
 MASKS = torch.ones(2, 1, 8, 8, dtype=torch.bool)
@@ -53,7 +53,11 @@ VIEWS = [
         lambda t: ViewDataset(_manifest(t), (100_000, 100_000)),
         r"size asks for 100000 pixels per image side, more than the limit of 512.*EIGVIEW_MAX_IMAGE_SIDE",
     ),
-    Case("dataset-size-float", lambda t: ViewDataset(_manifest(t), (8.5, 8)), r"size.*8\.5"),  # type: ignore[arg-type]
+    Case(
+        "dataset-size-float",
+        lambda t: ViewDataset(_manifest(t), (8.5, 8)),  # type: ignore[arg-type]
+        r"size\[0\] \(H\) must be an integer, got float 8\.5",
+    ),
     Case(
         "dataset-channels-2",
         lambda t: ViewDataset(_manifest(t), channels=2),
@@ -110,7 +114,11 @@ BACKGROUND = [
         lambda t: BackgroundModel(background=(2.0, 0.0, 0.0)),
         r"background=\(2\.0, 0\.0, 0\.0\) must hold one value in \[0, 1\]",
     ),
-    Case("model-colour-nan", lambda t: BackgroundModel(background=(math.nan,)), r"background.*nan"),
+    Case(
+        "model-colour-nan",
+        lambda t: BackgroundModel(background=(math.nan,)),
+        r"background=\(nan,\) must hold one value in \[0, 1\]",
+    ),
     Case(
         "model-colour-text",
         lambda t: BackgroundModel(background="black"),
@@ -124,9 +132,15 @@ BACKGROUND = [
         lambda t: BackgroundModel(tolerance=-0.1),
         r"tolerance=-0\.1 must be positive",
     ),
-    Case("model-tolerance-nan", lambda t: BackgroundModel(tolerance=math.nan), r"tolerance.*nan"),
+    Case(
+        "model-tolerance-nan",
+        lambda t: BackgroundModel(tolerance=math.nan),
+        r"tolerance=nan must be positive \(a finite number",
+    ),
     Case("model-fill-nan", lambda t: BackgroundModel(fill=math.nan), r"fill=nan must be a finite intensity"),
-    Case("model-fill-text", lambda t: BackgroundModel(fill="black"), r"fill.*'black'"),  # type: ignore[arg-type]
+    Case(
+        "model-fill-text", lambda t: BackgroundModel(fill="black"), r"fill must be a number, got str 'black'"
+    ),  # type: ignore[arg-type]
     Case(
         "model-min-fraction-1",
         lambda t: BackgroundModel(min_fraction=1.0),
@@ -137,7 +151,7 @@ BACKGROUND = [
         lambda t: BackgroundModel(min_fraction=-0.5),
         r"min_fraction=-0\.5 must lie in \[0, 1\)",
     ),
-    Case("model-border-0", lambda t: BackgroundModel(border=0), r"border.*0"),
+    Case("model-border-0", lambda t: BackgroundModel(border=0), r"border=0 must be >= 1"),
     Case(
         "model-colour-channels",
         lambda t: BackgroundModel(background=(0.1, 0.2)).masks(IMAGES),
@@ -151,24 +165,38 @@ BACKGROUND = [
     Case(
         "model-images-nan",
         lambda t: BackgroundModel().masks(torch.full((1, 1, 8, 8), math.nan)),
-        r"images.*(finite|NaN)",
+        r"images must be finite, got 64 NaN",
     ),
     Case(
-        "model-images-3d", lambda t: BackgroundModel().masks(IMAGES[0]), r"images.*\(B, C, H, W\)|images.*4"
+        "model-images-3d",
+        lambda t: BackgroundModel().masks(IMAGES[0]),
+        r"images must have shape \(B, C, H, W\), got shape \(3, 8, 8\)",
     ),
     Case(
         "set-background-masks-shape",
         lambda t: set_background(IMAGES, MASKS[:, :, :4]),
-        r"masks.*\(2, 1, 8, 8\).*\(2, 1, 8, 4\)|masks.*shape",
+        r"masks must have shape \(B, 1, H, W\) = \(2, 1, 8, 8\) to match the images, got \(2, 1, 4, 8\)",
     ),
-    Case("set-background-masks-float", lambda t: set_background(IMAGES, MASKS.float() * 0.5), r"masks.*bool"),
-    Case("set-background-value-nan", lambda t: set_background(IMAGES, MASKS, math.nan), r"value.*nan"),
+    Case(
+        "set-background-masks-float",
+        lambda t: set_background(IMAGES, MASKS.float() * 0.5),
+        r"masks must be a bool tensor .*got a tensor of dtype torch\.float32",
+    ),
+    Case(
+        "set-background-value-nan",
+        lambda t: set_background(IMAGES, MASKS, math.nan),
+        r"value=nan must be a finite intensity",
+    ),
     Case(
         "check-masks-batch",
         lambda t: check_masks(MASKS[:1], IMAGES),
         r"masks must have shape \(B, 1, H, W\) = \(2, 1, 8, 8\) to match the images, got \(1, 1, 8, 8\)",
     ),
-    Case("check-masks-int", lambda t: check_masks(MASKS.long() * 3, IMAGES), r"masks.*(bool|0 and 1|binary)"),
+    Case(
+        "check-masks-int",
+        lambda t: check_masks(MASKS.long() * 3, IMAGES),
+        r"masks must be a bool tensor .*got a tensor of dtype torch\.int64",
+    ),
     Case(
         "check-masks-numpy",
         lambda t: check_masks(np.ones((2, 1, 8, 8), bool), IMAGES),
@@ -181,18 +209,22 @@ BACKGROUND = [
     Case(
         "foreground-nan",
         lambda t: estimate_foreground(np.full((1, 8, 8), np.nan)),
-        r"image.*(finite|NaN|nan)",
+        r"image must hold finite values, got NaN",
     ),
     Case(
         "foreground-empty",
         lambda t: estimate_foreground(np.zeros((1, 0, 0))),
-        r"image.*(empty|0|too small|border)",
+        r"image .*(is empty|has no pixels|too small).*\(0, 0\)|image .*\(0, 0\).*(empty|no pixels|too small)",
     ),
-    Case("foreground-uniform", lambda t: estimate_foreground(np.full((1, 8, 8), 0.3)), r"leaves no object"),
+    Case(
+        "foreground-uniform",
+        lambda t: estimate_foreground(np.full((1, 8, 8), 0.3)),
+        r"background=\(0\.3\).*leaves no object in the image",
+    ),
     Case(
         "foreground-colour-length",
         lambda t: estimate_foreground(np.zeros((3, 8, 8)), (0.1, 0.2)),
-        r"background.*(2|channels)",
+        r"background=\(0\.1, 0\.2\) must hold C=3 values, one per channel",
     ),
 ]
 
@@ -270,12 +302,12 @@ PREPROCESSING = [
     Case(
         "prepare-nan",
         lambda t: prepare_array(np.full((1, 8, 8), np.nan, np.float32), Preprocessing((8, 8), 1)),
-        r"image.*(finite|NaN|nan)",
+        r"image must hold finite values in \[0, 1\], got min=.*nan",
     ),
     Case(
         "prepare-out-of-range",
         lambda t: prepare_array(np.full((1, 8, 8), 1e30, np.float32), Preprocessing((8, 8), 1)),
-        r"image.*\[0, 1\]",
+        r"image must hold finite values in \[0, 1\], got min=.*1e\+30",
     ),
     Case(
         "prepare-prep-dict",
@@ -287,7 +319,54 @@ PREPROCESSING = [
 CASES = VIEWS + BACKGROUND + PREPROCESSING
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def _dataset_item(out: ViewDataset, tmp: Path) -> bool:
+    """Six views resized to (1, 8, 8), the first one the egg at 0 degrees, values in [0, 1]."""
+    item = out[0]
+    assert len(out) == 6 and (item["object"], item["azimuth"]) == ("egg", 0.0), item
+    image = item["image"]
+    assert image.shape == (1, 8, 8) and float(image.min()) >= 0 and float(image.max()) <= 1, image
+    return True
+
+
+def _square_masks(out: torch.Tensor, tmp: Path) -> bool:
+    """A bright square on a uniform background: masks (B, 1, H, W), True on the square only."""
+    expected = torch.zeros(2, 1, 8, 8, dtype=torch.bool)
+    expected[..., 2:6, 2:6] = True
+    assert out.dtype == torch.bool and torch.equal(out, expected), out
+    return True
+
+
+def _square() -> torch.Tensor:
+    images = torch.full((2, 3, 8, 8), 0.2)
+    images[..., 2:6, 2:6] = 0.9
+    return images
+
+
+def _prepared(out: np.ndarray, tmp: Path) -> bool:
+    """A uniform (8, 8) gray image prepared at (4, 4): (1, 4, 4) float32 of the same gray."""
+    assert out.shape == (1, 4, 4) and out.dtype == np.float32, (out.shape, out.dtype)
+    assert np.allclose(out, 0.25, atol=1e-6), out
+    return True
+
+
+GOOD = [
+    Good("dataset", lambda t: ViewDataset(_manifest(t), (8, 8)), _dataset_item),
+    Good("background-masks", lambda t: BackgroundModel().masks(_square()), _square_masks),
+    Good(
+        "prepare-array",
+        lambda t: prepare_array(np.full((1, 8, 8), 0.25, np.float32), Preprocessing((4, 4), 1)),
+        _prepared,
+    ),
+]
+
+
+@pytest.mark.parametrize("case", params(CASES))
 def test_bad_input_gets_a_clear_error(case: Case, tmp_path: Path) -> None:
     kind, what = outcome(case, tmp_path)
     assert kind == "clear", what
+
+
+@pytest.mark.parametrize("case", params(GOOD))
+def test_good_input_is_answered_right(case: Good, tmp_path: Path) -> None:
+    kind, what = judge(case, tmp_path)
+    assert kind == "right", what

@@ -1,11 +1,13 @@
 """Bad manifests and folder patterns given to :class:`~torch_eigview.datasets.manifest.ViewManifest`:
 each must raise ValueError or TypeError naming the file and line (or the argument), the
 constraint and the value; the formats spreadsheets and editors write (BOM, CRLF, quoted
-commas, unicode names, extra columns) must read as the same views.
+commas, unicode names, extra columns) must read as the same views, and the good manifests
+and patterns of ``GOOD`` as the views they list.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -14,7 +16,7 @@ import pytest
 from torch_eigview.datasets.manifest import ViewManifest
 
 from tests.adversarial import files, views
-from tests.adversarial.harness import Case, outcome
+from tests.adversarial.harness import Case, Good, judge, outcome, params
 
 HEAD = "path,object,azimuth\n"
 
@@ -150,7 +152,7 @@ CSV = [
     Case(
         "field-too-large",
         _read(HEAD + "egg/0.png," + "x" * 200_000 + ",0\n"),
-        r"m\.csv line 2: .*field.*(larger|limit)",
+        r"m\.csv line 2: cannot be parsed as CSV: field larger than field limit",
     ),
     Case(
         "unclosed-quote",
@@ -159,7 +161,11 @@ CSV = [
     ),
     Case("binary-file", _read_bytes(bytes(range(256)) * 4), r"m\.csv line \d+: is not UTF-8 text"),
     Case("path-int", lambda t: ViewManifest.from_csv(3), r"path must be a str or a path, got int"),  # type: ignore[arg-type]
-    Case("path-directory-itself", lambda t: ViewManifest.from_csv(t), r"manifest .* is a directory"),
+    Case(
+        "path-directory-itself",
+        lambda t: ViewManifest.from_csv(t),
+        r"manifest .* is a directory, not a regular file",
+    ),
     Case(
         "skipped-not-a-list",
         lambda t: ViewManifest.from_csv(views.csv(t, HEAD + "none.png,egg,0\n"), skipped="x"),  # type: ignore[arg-type]
@@ -176,13 +182,31 @@ PATTERN = [
     Case(
         "pattern-no-azimuth", _pattern("{object}/x.png"), r"pattern='\{object\}/x\.png' must name the fields"
     ),
-    Case("pattern-unknown-field", _pattern("{object}/{angle}.png"), r"unknown field \{angle\}"),
-    Case("pattern-stray-brace", _pattern("{object}/{azimuth}}.png"), r"unmatched brace"),
-    Case("pattern-absolute", _pattern("/{object}/{azimuth}.png"), r"must be a path relative to the root"),
     Case(
-        "pattern-escapes-root", _pattern("../{object}/{azimuth}.png"), r"must be a path relative to the root"
+        "pattern-unknown-field",
+        _pattern("{object}/{angle}.png"),
+        r"pattern='\{object\}/\{angle\}\.png': unknown field \{angle\}",
     ),
-    Case("pattern-no-match", _pattern("{object}/{azimuth}.jpg"), r"holds no file that matches pattern"),
+    Case(
+        "pattern-stray-brace",
+        _pattern("{object}/{azimuth}}.png"),
+        r"pattern='\{object\}/\{azimuth\}\}\.png' holds an unmatched brace",
+    ),
+    Case(
+        "pattern-absolute",
+        _pattern("/{object}/{azimuth}.png"),
+        r"pattern='/\{object\}/\{azimuth\}\.png' must be a path relative to the root",
+    ),
+    Case(
+        "pattern-escapes-root",
+        _pattern("../{object}/{azimuth}.png"),
+        r"pattern='\.\./\{object\}/\{azimuth\}\.png' must be a path relative to the root",
+    ),
+    Case(
+        "pattern-no-match",
+        _pattern("{object}/{azimuth}.jpg"),
+        r"root=.* holds no file that matches pattern='\{object\}/\{azimuth\}\.jpg'",
+    ),
     Case("pattern-not-str", lambda t: ViewManifest.from_pattern(t, 5), r"pattern must be a str, got int"),  # type: ignore[arg-type]
     Case("pattern-empty", _pattern(""), r"pattern='' must name the fields"),
     Case(
@@ -202,7 +226,7 @@ PATTERN = [
             files.fifo(t / "egg" / "30.png"),
             ViewManifest.from_pattern(t, "{object}/{azimuth}.png"),
         ),
-        r"egg/30\.png.*FIFO",
+        r"egg/30\.png is a FIFO .*not a regular file",
     ),
     Case(
         "pattern-elevation-95",
@@ -217,11 +241,73 @@ PATTERN = [
 
 CASES = CSV + PATTERN
 
+#: The views :func:`views.manifest` lists: (object, azimuth, file), in its order.
+LISTED = [(o, float(a), f"{o}/{a}.png") for o in views.OBJECTS for a in views.AZIMUTHS]
 
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+
+def _views(manifest: ViewManifest, tmp: Path) -> list[tuple[str, float, str]]:
+    return [(e.object, e.azimuth, e.path.relative_to(tmp).as_posix()) for e in manifest]
+
+
+def _lists_the_views(manifest: ViewManifest, tmp: Path) -> bool:
+    assert sorted(_views(manifest, tmp)) == LISTED, _views(manifest, tmp)
+    assert all(math.isnan(e.elevation) and e.mask is None for e in manifest), list(manifest)
+    return True
+
+
+def _with_columns(tmp: Path) -> ViewManifest:
+    """A manifest with the optional elevation and mask columns."""
+    views.manifest(tmp)
+    views.png(tmp / "mask.png", views._rendered()["egg", 0])
+    return ViewManifest.from_csv(
+        _write(tmp, "path,object,azimuth,elevation,mask\negg/0.png,egg,350,-30,mask.png\n")
+    )
+
+
+def _columns_read(manifest: ViewManifest, tmp: Path) -> bool:
+    (entry,) = list(manifest)
+    assert (entry.object, entry.azimuth, entry.elevation) == ("egg", 350.0, -30.0), entry
+    assert entry.mask == tmp / "mask.png", entry
+    return True
+
+
+def _skipping(tmp: Path) -> tuple[ViewManifest, list[str]]:
+    """The manifest plus one line naming a missing image, read with ``skipped``."""
+    skipped: list[str] = []
+    return ViewManifest.from_csv(views.manifest(tmp, "none.png,egg,30\n"), skipped=skipped), skipped
+
+
+def _skipped_one(out: tuple[ViewManifest, list[str]], tmp: Path) -> bool:
+    manifest, skipped = out
+    assert _lists_the_views(manifest, tmp)
+    assert len(skipped) == 1 and "views.csv line 8: image" in skipped[0] and "does not exist" in skipped[0], (
+        skipped
+    )
+    return True
+
+
+GOOD = [
+    Good("manifest", lambda t: ViewManifest.from_csv(views.manifest(t)), _lists_the_views),
+    Good(
+        "pattern",
+        lambda t: (views.manifest(t), ViewManifest.from_pattern(t, "{object}/{azimuth}.png"))[1],
+        _lists_the_views,
+    ),
+    Good("elevation-and-mask-columns", _with_columns, _columns_read),
+    Good("skipped-bad-line", _skipping, _skipped_one),
+]
+
+
+@pytest.mark.parametrize("case", params(CASES))
 def test_bad_manifest_gets_a_clear_error(case: Case, tmp_path: Path) -> None:
     kind, what = outcome(case, tmp_path)
     assert kind == "clear", what
+
+
+@pytest.mark.parametrize("case", params(GOOD))
+def test_good_manifest_is_answered_right(case: Good, tmp_path: Path) -> None:
+    kind, what = judge(case, tmp_path)
+    assert kind == "right", what
 
 
 @pytest.mark.parametrize(

@@ -112,24 +112,15 @@ def test_config_errors(kwargs: dict[str, object], match: str) -> None:
 @pytest.mark.parametrize(
     ("extra", "match"),
     [
-        (["--seeds", "1"], "--seeds=1 must be >= 2"),
-        (["--seeds", "73"], "--seeds=73 must be <= 72"),
-        (["--seeds", "7"], r"--seeds=7 from center=0 puts seed views at \[51.429"),
+        (["--circle", "1"], "--circle=1 must be >= 2"),
+        (["--circle", "73"], "--circle=73 must be <= 72"),
+        (["--circle", "7"], r"--circle=7 from center=0 puts seed views at \[51.429"),
         (
-            ["--seeds", "8", "--center", "2"],
+            ["--circle", "8", "--center", "2"],
             r"between the available poses \[0, 5, 10, 15, ..., 350, 355\] \(72 poses\)",
         ),
-        (
-            ["--seeds", "4", "--method", "dense", "--dense-step", "12"],
-            "--dense-step=12 must be a positive multiple",
-        ),
-        (["--seeds", "4", "--views", "3"], "--seeds 4 places its own seed views: it cannot take --views 3"),
-        (["--seeds", "4", "--dense-step", "10"], "--dense-step 10 needs --method dense"),
-        (["--dense-step", "10", "--alpha", "10"], "--dense-step 10 needs --seeds"),
-        (["--overlap", "5", "--alpha", "10"], "--overlap 5 needs --seeds"),
-        (["--seeds", "6", "--overlap", "40"], r"--overlap=40 must be in \[0, alpha/2 = 30\]"),
-        (["--seeds", "4", "--overlap", "5"], "--overlap=5 must be .* below 90 - alpha = 0"),
-        (["--seeds", "4", "--alpha", "10"], "--alpha 10 contradicts --seeds 4"),
+        (["--circle", "4", "--views", "3"], "--circle 4 places its own seed views: it cannot take --views 3"),
+        (["--circle", "4", "--alpha", "10"], "--alpha 10 contradicts --circle 4"),
         ([], "--alpha is required"),
     ],
 )
@@ -137,7 +128,7 @@ def test_cli_errors(
     coil_root: Path, extra: list[str], match: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     with pytest.raises(SystemExit) as info:
-        main(["coil", "--root", str(coil_root), "--objects", "1-2", *extra])
+        main(["coil", "--folder", str(coil_root), "--objects", "1-2", *extra])
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith("eigview: error: ")
@@ -149,7 +140,7 @@ def test_cli_sparse_circle_json(coil_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "r.json"
     with contextlib.redirect_stdout(io.StringIO()) as text:
         status = main(
-            ["coil", "--root", str(coil_root), "--objects", "1-2", "--seeds", "6", "--method", "sparse",
+            ["coil", "--folder", str(coil_root), "--objects", "1-2", "--circle", "6", "--method", "sparse",
              "--components", "3", "--json", str(out)]
         )  # fmt: skip
     assert status == 0 and "full circle, 6 seed views from center=0" in text.getvalue()

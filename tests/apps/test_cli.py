@@ -15,9 +15,9 @@ import skimage.io
 
 from torch_eigview.apps.cli import main
 from torch_eigview.apps.cli_args import progress_bar
-from torch_eigview.apps.view_inputs import model_preprocessing
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.io.checkpoint import load_recognizer
+from torch_eigview.io.model import model_preprocessing
 
 # Two objects, seeds at 0 and 10 degrees, 4 synthesized views each, 5 test views each.
 SMALL = [
@@ -38,7 +38,7 @@ def small_run(coil_root: Path, tmp_path_factory: pytest.TempPathFactory) -> dict
     stdout = io.StringIO()
     with contextlib.redirect_stdout(stdout):
         status = main(
-            ["coil", "--root", str(coil_root), *SMALL, "--json", str(json_path), "--save", str(model_path)]
+            ["coil", "--folder", str(coil_root), *SMALL, "--json", str(json_path), "--save", str(model_path)]
         )
     return {"status": status, "stdout": stdout.getvalue(), "json": json_path, "model": model_path}
 
@@ -100,13 +100,13 @@ def _exit_status(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[i
 
 
 def test_empty_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, err = _exit_status(["coil", "--root", str(tmp_path), "--alpha", "10"], capsys)
+    code, err = _exit_status(["coil", "--folder", str(tmp_path), "--alpha", "10"], capsys)
     assert code == 2
     assert "holds no COIL files" in err and str(tmp_path) in err
 
 
 def test_missing_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, err = _exit_status(["coil", "--root", str(tmp_path / "nope"), "--alpha", "10"], capsys)
+    code, err = _exit_status(["coil", "--folder", str(tmp_path / "nope"), "--alpha", "10"], capsys)
     assert code == 2
     assert "must be an existing directory" in err
 
@@ -140,7 +140,7 @@ def test_bad_arguments(
     extra: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # Argument errors come before the folder is read; the folder is a real (empty) one anyway.
-    code, err = _exit_status(["coil", "--root", str(tmp_path), "--alpha", "10", *extra], capsys)
+    code, err = _exit_status(["coil", "--folder", str(tmp_path), "--alpha", "10", *extra], capsys)
     assert code == 2
     assert message in err
 
@@ -149,10 +149,10 @@ def test_missing_arguments(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     assert _exit_status([], capsys)[0] == 2
-    # Without --root the images are looked for in $TORCH_EIGVIEW_DATA/coil-20-proc: absent here.
+    # Without --folder the images are looked for in $TORCH_EIGVIEW_DATA/coil-20-proc: absent here.
     monkeypatch.setenv("TORCH_EIGVIEW_DATA", str(tmp_path))
     code, err = _exit_status(["coil", "--alpha", "10"], capsys)
-    assert code == 2 and "--root" in err
+    assert code == 2 and "--folder" in err
     assert str(tmp_path / "coil-20-proc") in err and "TORCH_EIGVIEW_DATA" in err
     assert "Traceback" not in err
 
@@ -173,7 +173,7 @@ def test_a_turntable_of_36_views_every_10_degrees(tmp_path: Path, capsys: pytest
     json_path.parent.mkdir()
     args = [
         "coil",
-        "--root",
+        "--folder",
         str(tmp_path),
         "--alpha",
         "20",
@@ -204,7 +204,7 @@ def test_a_gray_backdrop_set_to_zero(tmp_path: Path, capsys: pytest.CaptureFixtu
             skimage.io.imsave(tmp_path / f"obj{obj}__{p}.png", img, check_contrast=False)
     json_path = tmp_path / "out" / "r.json"
     json_path.parent.mkdir()
-    args = ["coil", "--root", str(tmp_path), "--alpha", "10", "--test", "-10", "10", "--method", "dense"]
+    args = ["coil", "--folder", str(tmp_path), "--alpha", "10", "--test", "-10", "10", "--method", "dense"]
     args += ["--components", "3", "--quiet", "--json", str(json_path)]
     model_path = tmp_path / "out" / "model.pt"
     assert main([*args, "--background", "110", "--tolerance", "8", "--save", str(model_path)]) == 0
@@ -221,7 +221,7 @@ def test_a_gray_backdrop_set_to_zero(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 
 def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``--root`` defaults to ``$TORCH_EIGVIEW_DATA/coil-20-proc``; the flag wins over it."""
+    """``--folder`` defaults to ``$TORCH_EIGVIEW_DATA/coil-20-proc``; the flag wins over it."""
     from torch_eigview.evaluation import coil as experiment
 
     seen: list[Path] = []
@@ -236,7 +236,7 @@ def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None
         main(["coil", "--alpha", "10"])
     monkeypatch.setenv("TORCH_EIGVIEW_DATA", "/no/such/folder")
     with pytest.raises(SystemExit):
-        main(["coil", "--alpha", "10", "--root", str(coil_root)])
+        main(["coil", "--alpha", "10", "--folder", str(coil_root)])
     assert seen == [coil_root, coil_root]
 
 
@@ -253,7 +253,7 @@ def test_root_from_env(coil_root: Path, monkeypatch: pytest.MonkeyPatch) -> None
 def test_bad_experiment_arguments(
     coil_root: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
 ) -> None:
-    code, err = _exit_status(["coil", "--root", str(coil_root), *extra], capsys)
+    code, err = _exit_status(["coil", "--folder", str(coil_root), *extra], capsys)
     assert code == 2
     assert message in err
 
@@ -263,7 +263,7 @@ def test_bad_experiment_arguments(
 def test_module_entry_point(coil_root: Path, tmp_path: Path) -> None:
     argv = [
         sys.executable, "-m", "torch_eigview", "coil",
-        "--root", str(coil_root),
+        "--folder", str(coil_root),
         "--alpha", "10",
         "--synth", "0", "5", "5",
         "--test", "0", "5",
@@ -279,7 +279,7 @@ def test_module_entry_point(coil_root: Path, tmp_path: Path) -> None:
     assert record["n_test"] == 4 and record["n_train_views"] == 4
 
     bad = subprocess.run(
-        [sys.executable, "-m", "torch_eigview", "coil", "--root", str(tmp_path), "--alpha", "10"],
+        [sys.executable, "-m", "torch_eigview", "coil", "--folder", str(tmp_path), "--alpha", "10"],
         capture_output=True,
         text=True,
         timeout=300,
@@ -308,9 +308,9 @@ def test_progress_bar_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> Non
 
 
 @pytest.mark.parametrize("quiet", [False, True], ids=["terminal", "quiet"])
-@pytest.mark.parametrize("command", ["demo", "synth"])
-def test_demo_and_synth_get_progress(command: str, quiet: bool, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``eigview demo`` / ``synth`` hand their loop a tqdm bar on a terminal, none with --quiet."""
+@pytest.mark.parametrize("command", ["demo"])
+def test_demo_gets_progress(command: str, quiet: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``eigview demo`` hands its loop a tqdm bar on a terminal, none with --quiet."""
     from torch_eigview.apps import demo
 
     calls: list[object] = []
@@ -329,8 +329,7 @@ def test_demo_and_synth_get_progress(command: str, quiet: bool, monkeypatch: pyt
 def test_demo_loop_reports_each_object() -> None:
     """The demo's progress wrapper sees every object of the scene, in order."""
     from torch_eigview.apps.demo import recognition_experiment
-    from torch_eigview.apps.synthetic_scene import SyntheticScene
-    from torch_eigview.datasets import OrthographicCamera
+    from torch_eigview.datasets import OrthographicCamera, SyntheticScene
 
     seen: list[str] = []
 
@@ -342,10 +341,8 @@ def test_demo_loop_reports_each_object() -> None:
     scene = SyntheticScene(shapes=("head", "egg"), camera=OrthographicCamera(24))
     record = recognition_experiment(
         10.0,
-        2,
         scene=scene,
         components=3,
-        correspondences="exact",
         synth=(-5.0, 5.0, 5.0),
         test=(0.0, 2.0),
         progress=progress,

@@ -40,26 +40,26 @@ def root(tmp_path: Path) -> Path:
 def test_coil_arguments(
     root: Path, args: list[str], message: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert message in _err(["coil", "--root", str(root), *args], capsys)
+    assert message in _err(["coil", "--folder", str(root), *args], capsys)
 
 
 def test_coil_synth_views_bounded(
     root: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    err = _err(["coil", "--root", str(root), "--alpha", "5", "--synth", "-20", "20", "1e-9"], capsys)
+    err = _err(["coil", "--folder", str(root), "--alpha", "5", "--synth", "-20", "20", "1e-9"], capsys)
     assert "synth asks for 4e+10 views per object, more than the limit of 3600" in err
     assert "EIGVIEW_MAX_VIEWS" in err
     monkeypatch.setenv("EIGVIEW_MAX_VIEWS", "10")
-    assert "limit of 10" in _err(["coil", "--root", str(root), "--alpha", "5"], capsys)
+    assert "limit of 10" in _err(["coil", "--folder", str(root), "--alpha", "5"], capsys)
 
 
 def test_coil_mixed_pose_unit_is_reported(root: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (root / "obj2__0.png").write_bytes((root / "obj1__0.png").read_bytes())
     (root / "obj1__72.png").write_bytes((root / "obj1__0.png").read_bytes())
-    assert "mixes pose conventions" in _err(["coil", "--root", str(root), "--alpha", "5"], capsys)
+    assert "mixes pose conventions" in _err(["coil", "--folder", str(root), "--alpha", "5"], capsys)
 
 
-@pytest.mark.parametrize("command", ["demo", "synth"])
+@pytest.mark.parametrize("command", ["demo"])
 def test_image_side_bounded(command: str, capsys: pytest.CaptureFixture[str]) -> None:
     err = _err([command, "--size", "100000"], capsys)
     assert "--size asks for 100000 pixels per image side, more than the limit of 512" in err
@@ -70,7 +70,7 @@ def test_image_side_bounded(command: str, capsys: pytest.CaptureFixture[str]) ->
 
 def test_demo_alpha_named(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--alpha must be a finite number, got 'nan'" in _err(["demo", "--alpha", "nan"], capsys)
-    assert "--alpha must be a finite number" in _err(["synth", "--alpha", "5", "inf"], capsys)
+    assert "--alpha must be a finite number" in _err(["demo", "--alpha", "inf"], capsys)
 
 
 @pytest.mark.parametrize("opset", ["99", "17", "x"])

@@ -32,13 +32,13 @@ SMALL = [
 
 @pytest.mark.parametrize("value", ["0", "-1", "two", "1.5"])
 def test_bad_threads(value: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, err = _exit_status(["coil", "--root", str(tmp_path), "--alpha", "10", "--threads", value], capsys)
+    code, err = _exit_status(["coil", "--folder", str(tmp_path), "--alpha", "10", "--threads", value], capsys)
     assert code == 2 and "--threads must be an integer >= 1" in err and repr(value) in err
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="the error is for a machine without CUDA")
 def test_device_cuda_without_a_gpu(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, err = _exit_status(["coil", "--root", str(coil_root), *SMALL, "--device", "cuda"], capsys)
+    code, err = _exit_status(["coil", "--folder", str(coil_root), *SMALL, "--device", "cuda"], capsys)
     assert code == 2 and "--device cuda" in err and "is_available() is False" in err
 
 
@@ -60,7 +60,7 @@ def test_threads_applied_in_the_command_and_restored(
     for flag, expected in (([], 1), (["--threads", "2"], 2)):
         seen.clear()
         with contextlib.redirect_stdout(io.StringIO()):
-            assert main(["coil", "--root", str(coil_root), *SMALL, "--quiet", *flag]) == 0
+            assert main(["coil", "--folder", str(coil_root), *SMALL, "--quiet", *flag]) == 0
         assert seen and set(seen) == {expected}
         assert torch.get_num_threads() == before
 
@@ -75,12 +75,12 @@ def test_cuda_run_matches_cpu_and_counts_host_copies(coil_root: Path) -> None:
 
     cpu, gpu = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(cpu):
-        main(["coil", "--root", str(coil_root), *SMALL, "--quiet"])
+        main(["coil", "--folder", str(coil_root), *SMALL, "--quiet"])
     with (
         profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof,
         contextlib.redirect_stdout(gpu),
     ):
-        main(["coil", "--root", str(coil_root), *SMALL, "--quiet", "--device", "cuda"])
+        main(["coil", "--folder", str(coil_root), *SMALL, "--quiet", "--device", "cuda"])
     d2h = sum(e.count for e in prof.key_averages() if "DtoH" in e.key or "Device -> Host" in e.key)
     assert cpu.getvalue().splitlines()[-3] == gpu.getvalue().splitlines()[-3]  # the total accuracy line
     n_views = 2 * 4  # two objects, four synthesized views each

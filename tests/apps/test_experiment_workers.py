@@ -9,11 +9,12 @@ from pathlib import Path
 import pytest
 import torch
 
+import torch_eigview._tuning as _tuning
 import torch_eigview.scale.galleries as object_synthesis
 from torch_eigview.apps.cli import main
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.evaluation.coil import CoilExperiment
-from torch_eigview.scale.parallel import PARALLEL_PIXELS, available_cpus, object_workers
+from torch_eigview.scale.parallel import available_cpus, object_workers
 from torch_eigview.scale.thread_policy import threads
 from torch_eigview.synthesis import ElevationFallbackWarning
 
@@ -100,17 +101,17 @@ def test_worker_policy() -> None:
     assert object_workers(820, 128 * 128, 20) == 0  # COIL-20 at one center: 13 M pixels
     big = object_workers(7200, 128 * 128, 20)  # the full circle, M = 8: 118 M pixels
     assert big == (available_cpus() if available_cpus() >= 2 else 0)
-    assert object_workers(int(PARALLEL_PIXELS), 1, 1) == 0  # one object: nothing to share
-    assert object_workers(int(PARALLEL_PIXELS), 1, 2) == (
+    assert object_workers(int(_tuning.PARALLEL_PIXELS), 1, 1) == 0  # one object: nothing to share
+    assert object_workers(int(_tuning.PARALLEL_PIXELS), 1, 2) == (
         min(2, available_cpus()) if available_cpus() >= 2 else 0
     )
-    assert object_workers(int(PARALLEL_PIXELS) - 1, 1, 2) == 0  # just below the threshold
+    assert object_workers(int(_tuning.PARALLEL_PIXELS) - 1, 1, 2) == 0  # just below the threshold
 
 
 @pytest.mark.parametrize("value", ["-1", "x", "1.5", ""])
 def test_bad_workers_flag(value: str, coil_root: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
-        main(["coil", "--root", str(coil_root), "--alpha", "10", "--workers", value])
+        main(["coil", "--folder", str(coil_root), "--alpha", "10", "--workers", value])
     assert exc.value.code == 2
     assert f"--workers must be 'auto' or an integer >= 0, got {value!r}" in capsys.readouterr().err
 

@@ -13,8 +13,8 @@ import pytest
 import skimage.io
 import torch
 
-import torch_eigview.synthesis
-from torch_eigview.apps.view_inputs import background_arg
+import torch_eigview.scale.galleries
+from torch_eigview.apps.view_options import background_arg
 from torch_eigview.datasets import Backdrop, OrthographicCamera, make_object, render
 from torch_eigview.io.checkpoint import load_recognizer
 from torch_eigview.io.preprocessing import Preprocessing
@@ -54,7 +54,7 @@ def views(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _fit(views: Path, manifest: str, out: Path, *extra: str) -> list[str]:
     return [
         "fit", "--manifest", str(views / manifest), "--seeds", "0", "10", "--synth", "-20", "20", "2",
-        "--elevation", "0", "--no-extent", "--channels", "1", "-k", "8", "--quiet", *extra, "--out", str(out),
+        "--elevation", "0", "--extent", "off", "--channels", "1", "-k", "8", "--quiet", *extra, "--out", str(out),
     ]  # fmt: skip
 
 
@@ -62,13 +62,13 @@ def test_fit_hands_the_seed_masks_to_synthesis_and_records_the_background(
     views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     seen: list[torch.Tensor | None] = []
-    real = torch_eigview.synthesis.synthesize_views
+    real = torch_eigview.scale.galleries.synthesize_views
 
     def spy(*args: object, masks: torch.Tensor | None = None, **kwargs: object) -> object:
         seen.append(masks)
         return real(*args, masks=masks, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(torch_eigview.synthesis, "synthesize_views", spy)
+    monkeypatch.setattr(torch_eigview.scale.galleries, "synthesize_views", spy)
     out = tmp_path / "m.pt"
     code, _, err = run_cli(_fit(views, "views.csv", out, "--background", "auto"), capsys)
     assert code == 0, err

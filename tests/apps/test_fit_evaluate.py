@@ -149,7 +149,13 @@ def test_evaluate_reports_bad_rows_and_goes_on(
     rows_skipped = {r["row"] for r in record["skipped"]}
     assert rows_skipped == {f"{manifest} line {n}" for n in (20, 21, 22, 23, 24)}
     errors = " ".join(r["error"] for r in record["skipped"])
-    for needle in ("gone.png does not exist", "cannot read image", "has size", "azimuth='ten'", "duplicates"):
+    for needle in (
+        "gone.png does not exist",
+        "is not an image file that can be read",
+        "has size",
+        "azimuth='ten'",
+        "duplicates",
+    ):
         assert needle in errors
     assert record["unknown_objects"] == {"cat": 1}
     assert "bad.csv line 22" in err and "rows skipped: 5" in out
@@ -162,8 +168,8 @@ def test_evaluate_reports_bad_rows_and_goes_on(
             ["--seeds", "0", "15"],
             r"object 'egg' has no view at the seed azimuth 15 degrees .*azimuths 0, 10, 20",
         ),
-        (["--seeds", "8"], r"object 'egg' has no view at the seed azimuth 45 degrees"),
-        (["--seeds", "2"], r"--seeds 2: one value is M.*integer >= 3"),
+        (["--circle", "8"], r"object 'egg' has no view at the seed azimuth 45 degrees"),
+        (["--seeds", "2"], r"--seeds 2 needs two or more azimuths.*--circle M"),
         (["--seeds", "0", "360"], r"repeats an azimuth"),
         (["--seeds", "0", "10", "--synth", "0", "10", "0"], r"--synth"),
     ],
@@ -264,9 +270,9 @@ def test_predict_model_and_onnx_apply_the_recorded_preprocessing(
 @pytest.mark.parametrize(
     ("coil_args", "seeds", "tested"),
     [
-        (["--alpha", "10"], ["0", "10"], range(-45, 50, 5)),
-        (["--alpha", "10", "--views", "3"], ["0", "10", "20"], range(-45, 50, 5)),
-        (["--seeds", "8"], ["8"], [a for a in range(0, 360, 5) if a % 45]),
+        (["--alpha", "10"], ["--seeds", "0", "10"], range(-45, 50, 5)),
+        (["--alpha", "10", "--views", "3"], ["--seeds", "0", "10", "20"], range(-45, 50, 5)),
+        (["--circle", "8"], ["--circle", "8"], [a for a in range(0, 360, 5) if a % 45]),
     ],
     ids=["two-seeds", "three-seeds", "circle-8"],
 )
@@ -288,9 +294,9 @@ def test_coil_through_a_manifest_equals_eigview_coil(
     ]
     coil_json, eval_json, model = tmp_path / "coil.json", tmp_path / "eval.json", tmp_path / "m.pt"
     synth = ["--synth", "-20", "20", "2"]
-    coil_argv = ["coil", "--root", str(coil_root), *coil_args, "--objects", "1,4,7", *synth]
+    coil_argv = ["coil", "--folder", str(coil_root), *coil_args, "--objects", "1,4,7", *synth]
     assert main([*coil_argv, "--quiet", "--json", str(coil_json)]) == 0
-    fit_argv = ["fit", "--manifest", str(_write(tmp_path / "all.csv", listed)), "--seeds", *seeds]
+    fit_argv = ["fit", "--manifest", str(_write(tmp_path / "all.csv", listed)), *seeds]
     assert main([*fit_argv, *synth, "--quiet", "--out", str(model)]) == 0
     manifest = _write(tmp_path / "test.csv", tests)
     assert (

@@ -107,7 +107,7 @@ def test_full_circle_held_out_midpoints_leave_the_gallery_unchanged(
     tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
 ) -> None:
     manifest = _manifest(tmp_path_factory.mktemp("circle"), ("egg",), list(range(0, 360, 90)))
-    argv = ["fit", "--manifest", str(manifest), "--seeds", "4", "--synth", "0", "360", "15", "-k", "4"]
+    argv = ["fit", "--manifest", str(manifest), "--circle", "4", "--synth", "0", "360", "15", "-k", "4"]
     assert main([*argv, "--quiet", "--out", str(tmp_path / "m.pt")]) == 0
     assert main([*argv, "--quiet", "--no-reject", "--out", str(tmp_path / "plain.pt")]) == 0
     recognizer, _ = load_recognizer(tmp_path / "m.pt")

@@ -17,7 +17,8 @@ import skimage.io
 import torch
 from onnx import helper, numpy_helper
 
-from torch_eigview.apps.predict import escape
+from torch_eigview.apps.cli import main
+from torch_eigview.apps.prediction import escape
 from torch_eigview.decomposition import Eigenspace
 from torch_eigview.io.checkpoint import save_recognizer
 from torch_eigview.io.onnx import export_recognizer
@@ -150,13 +151,21 @@ def test_wrong_input_shape_refused(model: Path, tmp_path: Path) -> None:
 
 
 def test_weight_budget(model: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The byte budget is the max_model_bytes limit; the command reads it from the environment."""
+    from torch_eigview.apps.cli import limits_from_environment
+    from torch_eigview.config import config_context
+
     info = OnnxModelInfo.from_props({p.key: p.value for p in onnx.load(str(model)).metadata_props})
-    monkeypatch.setenv("EIGVIEW_MAX_MODEL_BYTES", "64")
-    with pytest.raises(ValueError, match="EIGVIEW_MAX_MODEL_BYTES"):
+    with config_context(max_model_bytes=64), pytest.raises(ValueError, match="max_model_bytes"):
         check_recognizer_graph(model, info)
-    monkeypatch.setenv("EIGVIEW_MAX_MODEL_BYTES", "lots")
+    check_recognizer_graph(model, info)  # the default budget again
+    assert limits_from_environment({"EIGVIEW_MAX_MODEL_BYTES": "64"}) == {"max_model_bytes": 64}
     with pytest.raises(ValueError, match=r"EIGVIEW_MAX_MODEL_BYTES='lots' must be a positive integer"):
-        check_recognizer_graph(model, info)
+        limits_from_environment({"EIGVIEW_MAX_MODEL_BYTES": "lots"})
+    monkeypatch.setenv("EIGVIEW_MAX_MODEL_BYTES", "1_0")  # int() would take it as 10
+    with pytest.raises(SystemExit) as exited:
+        main(["predict", "--onnx", str(model), "x.png"])
+    assert exited.value.code == 2
 
 
 def test_fifo_model_and_fifo_image_never_opened(model: Path, images: list[str], tmp_path: Path) -> None:

@@ -34,20 +34,22 @@ def test_around_seeds_extends_past_both_end_seeds(steps: list[float], want: tupl
 
 
 def test_seed_plan_default_and_given_ranges() -> None:
-    assert seed_plan([0.0, 30.0], 0.0, None).thetas == angle_range(-20.0, 50.0, 1.0, "t")
-    assert seed_plan([0.0, 330.0], 0.0, None).thetas == angle_range(-50.0, 20.0, 1.0, "t")
-    assert seed_plan([0.0, 10.0, 20.0], 0.0, None).thetas == angle_range(-20.0, 40.0, 1.0, "t")
+    assert seed_plan([0.0, 30.0], None, 0.0, None).thetas == angle_range(-20.0, 50.0, 1.0, "t")
+    assert seed_plan([0.0, 330.0], None, 0.0, None).thetas == angle_range(-50.0, 20.0, 1.0, "t")
+    assert seed_plan([0.0, 10.0, 20.0], None, 0.0, None).thetas == angle_range(-20.0, 40.0, 1.0, "t")
     # --synth as given keeps its meaning: from the first seed, each further seed extending it.
-    assert seed_plan([0.0, 30.0], 0.0, (-20.0, 20.0, 2.0)).thetas == angle_range(-20.0, 20.0, 2.0, "t")
-    assert seed_plan([0.0, 10.0, 20.0], 0.0, (-20.0, 20.0, 1.0)).thetas == angle_range(-20.0, 30.0, 1.0, "t")
-    circle = seed_plan([8.0], 0.0, None)
+    assert seed_plan([0.0, 30.0], None, 0.0, (-20.0, 20.0, 2.0)).thetas == angle_range(-20.0, 20.0, 2.0, "t")
+    assert seed_plan([0.0, 10.0, 20.0], None, 0.0, (-20.0, 20.0, 1.0)).thetas == angle_range(
+        -20.0, 30.0, 1.0, "t"
+    )
+    circle = seed_plan(None, 8, 0.0, None)
     assert circle.thetas is None and circle.step == 1.0
 
 
 def test_synth_record_is_the_range_the_gallery_holds() -> None:
-    plan = seed_plan([0.0, 30.0], 0.0, None)
+    plan = seed_plan([0.0, 30.0], None, 0.0, None)
     assert synth_record(None, plan) == [-20.0, 50.0, 1.0]
-    assert synth_record([-20.0, 20.0, 2.0], seed_plan([0.0, 30.0], 0.0, (-20.0, 20.0, 2.0))) == [
+    assert synth_record([-20.0, 20.0, 2.0], seed_plan([0.0, 30.0], None, 0.0, (-20.0, 20.0, 2.0))) == [
         -20.0,
         20.0,
         2.0,
@@ -70,7 +72,7 @@ def test_check_synth_names_the_argument() -> None:
     assert check_synth(None, around=True) is None
     with pytest.raises(
         ValueError,
-        match=r"synth must be \(start, stop, step\) in degrees, 'around-seeds' or None, got 'around'",
+        match=r"synth must be \(start, stop, step\) in degrees, 'around-seeds', 'circle', a Circle or None, got 'around'",
     ):
         check_synth("around", around=True)
     with pytest.raises(
@@ -82,7 +84,9 @@ def test_check_synth_names_the_argument() -> None:
 def test_estimator_default_range_and_bad_values() -> None:
     assert FewViewEigenspace().synth == AROUND_SEEDS
     seeds = torch.rand(1, 2, 1, 8, 8)
-    with pytest.raises(ValueError, match=r"synth must be .*'around-seeds' or None, got 'all'"):
+    with pytest.raises(
+        ValueError, match=r"synth must be .*'around-seeds', 'circle', a Circle or None, got 'all'"
+    ):
         FewViewEigenspace(2, synth="all").fit(seeds, [0.0, 10.0])
     with pytest.raises(
         ValueError, match=r"reject_poses must be \(start, stop, step\) in degrees or 'around-seeds', got None"
@@ -93,7 +97,7 @@ def test_estimator_default_range_and_bad_values() -> None:
 def test_reject_poses_default_lies_past_both_seeds() -> None:
     """The held-out views that calibrate rejection: 45 degrees past both end seeds, every
     2.5, the gallery's angles left out; as given otherwise; the circle's midpoints."""
-    plan = seed_plan([0.0, 30.0], 0.0, None)
+    plan = seed_plan([0.0, 30.0], None, 0.0, None)
     poses = reject_poses(plan, None)
     assert poses == (-45.0, 75.0, 2.5)
     held = held_out_thetas(plan, poses)
@@ -101,7 +105,7 @@ def test_reject_poses_default_lies_past_both_seeds() -> None:
     assert sum(h < -20 for h in held) == sum(h > 50 for h in held) == 10  # both sides alike
     assert not set(held) & set(plan.thetas or [])
     assert reject_poses(plan, (-10.0, 10.0, 5.0)) == (-10.0, 10.0, 5.0)
-    circle = seed_plan([4.0], 0.0, (0.0, 0.0, 15.0))
+    circle = seed_plan(None, 4, 0.0, (0.0, 0.0, 15.0))
     assert reject_poses(circle, None) == (7.5, 352.5, 15.0)
     assert held_out_thetas(circle, reject_poses(circle, None)) == [7.5 + 15.0 * i for i in range(24)]
     assert held_out_thetas(plan, None) == []
@@ -109,7 +113,7 @@ def test_reject_poses_default_lies_past_both_seeds() -> None:
 
 def test_off_gallery_compares_round_the_circle() -> None:
     # Seeds 0 and 170: the gallery runs to 190, which is -170.
-    gallery = seed_plan([0.0, 170.0], 0.0, None).thetas or []
+    gallery = seed_plan([0.0, 170.0], None, 0.0, None).thetas or []
     held = off_gallery((-180.0, 180.0, 2.5), gallery, "reject_poses")
     assert -170.0 not in held and -175.0 not in held and -180.0 not in held and 180.0 not in held
     assert -172.5 in held
@@ -119,7 +123,7 @@ def test_off_gallery_compares_round_the_circle() -> None:
 
 def test_estimator_held_out_views_around_each_objects_seeds(monkeypatch: pytest.MonkeyPatch) -> None:
     """The default reject_poses follow each object's own seeds (30 and 10 apart here)."""
-    import torch_eigview.method.estimator as estimator_module
+    import torch_eigview.scale.galleries as estimator_module
 
     calls: list[list[float]] = []
     real = estimator_module.synthesize_views
@@ -141,6 +145,7 @@ def test_estimator_held_out_views_around_each_objects_seeds(monkeypatch: pytest.
 
 def test_check_synth_names_the_argument_for_arrays() -> None:
     with pytest.raises(
-        ValueError, match=r"synth must be \(start, stop, step\) in degrees, 'around-seeds' or None"
+        ValueError,
+        match=r"synth must be \(start, stop, step\) in degrees, 'around-seeds', 'circle', a Circle or None",
     ):
         check_synth(np.array([-20.0, 20.0, 1.0]), around=True)

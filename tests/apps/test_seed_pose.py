@@ -29,7 +29,7 @@ def _run(coil_root: Path, tmp_path: Path, pose: str) -> dict[str, object]:
     path = tmp_path / f"{pose}.json"
     with contextlib.redirect_stdout(io.StringIO()):
         status = main(
-            ["coil", "--root", str(coil_root), *SMALL, "--pose", pose, "--json", str(path), "--quiet"]
+            ["coil", "--folder", str(coil_root), *SMALL, "--pose", pose, "--json", str(path), "--quiet"]
         )
     assert status == 0
     return json.loads(path.read_text())
@@ -100,7 +100,7 @@ def test_two_seeds_round_the_circle_are_refused_before_any_work(
     def no_gallery(*args: object, **kwargs: object) -> None:
         raise AssertionError("the gallery was built")
 
-    monkeypatch.setattr(CoilExperiment, "_galleries", no_gallery)
+    monkeypatch.setattr(CoilExperiment, "_gallery_inputs", no_gallery)
     with pytest.raises(ValueError, match="at least 3 seeds round the circle, got 2"):
         CoilExperiment(seeds=2, method="sparse", objects=[1], three_view_pose=True).run(folder)
     with pytest.raises(TypeError, match="interpolate_pose, three_view_pose must be bools"):

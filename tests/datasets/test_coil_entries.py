@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import skimage.io
 
+from torch_eigview.config import config_context
 from torch_eigview.datasets.coil import CoilFolder, parse_object_spec
 
 
@@ -59,13 +60,12 @@ def test_entries_named_like_images_are_errors(tmp_path: Path, make: object, kind
 def test_object_spec_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(
         ValueError,
-        match=r"asks for 1e\+11 object ids, more than the limit of 100000; set the environment variable EIGVIEW_MAX_OBJECTS",
+        match=r"asks for 1e\+11 object ids, more than the limit of 100000 \(max_objects\); raise it with torch_eigview.config_context\(max_objects=...\).*EIGVIEW_MAX_OBJECTS",
     ):
         parse_object_spec("1-99999999999")
-    monkeypatch.setenv("EIGVIEW_MAX_OBJECTS", "5")
-    assert parse_object_spec("1-5") == [1, 2, 3, 4, 5]
-    with pytest.raises(ValueError, match="limit of 5"):
-        parse_object_spec("1-3,7-9")
-    monkeypatch.setenv("EIGVIEW_MAX_OBJECTS", "many")
-    with pytest.raises(ValueError, match="EIGVIEW_MAX_OBJECTS='many' must be a positive integer"):
-        parse_object_spec("1")
+    with config_context(max_objects=5):
+        assert parse_object_spec("1-5") == [1, 2, 3, 4, 5]
+        with pytest.raises(ValueError, match="limit of 5"):
+            parse_object_spec("1-3,7-9")
+    monkeypatch.setenv("EIGVIEW_MAX_OBJECTS", "5")  # the library reads no environment variable
+    assert len(parse_object_spec("1-9")) == 9

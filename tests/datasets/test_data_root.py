@@ -1,4 +1,5 @@
-"""Where the COIL images are looked for: ``--root`` (``root``), then ``TORCH_EIGVIEW_DATA``, then ../shared/data."""
+"""Where the data sets are looked for: an argument, then ``TORCH_EIGVIEW_DATA``, then
+``~/torch_eigview_data`` (scikit-learn's ``get_data_home`` order); never the source checkout."""
 
 from __future__ import annotations
 
@@ -6,34 +7,40 @@ from pathlib import Path
 
 import pytest
 
-from torch_eigview.datasets import DATA_ENV, default_data_root, find_coil_root
+from torch_eigview.datasets import DATA_ENV, find_coil_root, get_data_home
 
 
-def test_env_names_the_data_root(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_env_names_the_data_home(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     (tmp_path / "coil-20-proc").mkdir()
     monkeypatch.setenv(DATA_ENV, str(tmp_path))
-    assert default_data_root() == tmp_path
+    assert get_data_home() == tmp_path
     assert find_coil_root() == tmp_path / "coil-20-proc"
     (tmp_path / "coil-100").mkdir()
     assert find_coil_root(name="coil-100") == tmp_path / "coil-100"
 
 
-def test_flag_beats_env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_argument_beats_env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     given = tmp_path / "mine"
-    given.mkdir()
+    (given / "coil-20-proc").mkdir(parents=True)
     monkeypatch.setenv(DATA_ENV, str(tmp_path / "elsewhere"))
     assert find_coil_root(given) == given
     assert find_coil_root(str(given)) == given
+    assert get_data_home(given) == given
+    assert find_coil_root(data_home=given) == given / "coil-20-proc"
 
 
 @pytest.mark.parametrize("value", [None, ""], ids=["unset", "empty"])
-def test_default_is_beside_the_checkout(value: str | None, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_default_is_in_the_home_folder(
+    value: str | None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("HOME", str(tmp_path))
     if value is None:
         monkeypatch.delenv(DATA_ENV, raising=False)
     else:
         monkeypatch.setenv(DATA_ENV, value)
+    assert get_data_home() == tmp_path / "torch_eigview_data"
     checkout = Path(__file__).resolve().parents[2]
-    assert default_data_root() == checkout.parent / "shared" / "data"
+    assert checkout.parent not in get_data_home().parents  # nothing relative to the source tree
 
 
 def test_missing_from_env_says_where(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -43,13 +50,13 @@ def test_missing_from_env_says_where(tmp_path: Path, monkeypatch: pytest.MonkeyP
     message = str(info.value)
     assert str(tmp_path / "coil-20-proc") in message  # the folder expected
     assert f"from {DATA_ENV}={tmp_path}" in message  # why there
-    assert "coil-20-proc/" in message and DATA_ENV in message and "--root DIR" in message
+    assert "coil-20-proc/" in message and DATA_ENV in message and "--folder DIR" in message
 
 
-def test_missing_flag_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_missing_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(DATA_ENV, raising=False)
     with pytest.raises(
-        ValueError, match=r"root='.*nope' \(given with --root\) must be an existing directory"
+        ValueError, match=r"'.*nope' \(given as the folder itself\) must be an existing directory"
     ):
         find_coil_root(tmp_path / "nope")
     with pytest.raises(ValueError, match=f"{DATA_ENV} being unset"):

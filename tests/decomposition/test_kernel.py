@@ -323,7 +323,7 @@ def test_cli_kernel_option(coil_root: Path) -> None:
 
     args = [
         "coil",
-        "--root",
+        "--folder",
         str(coil_root),
         "--alpha",
         "10",

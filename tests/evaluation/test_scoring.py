@@ -1,4 +1,4 @@
-"""Tests for the shared recognition protocol: gallery, projection, recognizer, scoring."""
+"""Tests for ``score``: the recognition of each object's test views, its accuracy and pose error."""
 
 from __future__ import annotations
 
@@ -8,61 +8,39 @@ import threading
 import pytest
 import torch
 
-from torch_eigview.decomposition.eigenspace import Eigenspace
-from torch_eigview.evaluation.scoring import build_recognizer, fit_projection, score, stack_gallery
-from torch_eigview.nn.functional import unit_rows
-from torch_eigview.nn.kernel_projection import KernelProjection
-from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.evaluation import score
+from torch_eigview.method import FewViewEigenspace
+from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
 
 def _views(n: int, seed: int) -> torch.Tensor:
     return torch.rand(n, 1, 6, 5, generator=torch.Generator().manual_seed(seed))
 
 
-def test_stack_gallery_keeps_the_order_of_the_blocks() -> None:
-    a, b = _views(2, 0), _views(3, 1)
-    x, labels, poses = stack_gallery([(a, 7, [0.0, 5.0]), (b, 3, [-5.0, 0.0, 5.0])])
-    torch.testing.assert_close(x, torch.cat([a, b]), atol=0, rtol=0)
-    assert labels.tolist() == [7, 7, 3, 3, 3] and labels.dtype == torch.int64
-    assert poses.tolist() == [0.0, 5.0, -5.0, 0.0, 5.0] and poses.dtype == x.dtype
+def _gallery(
+    blocks: list[tuple[torch.Tensor, int, list[float]]],
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The blocks' views, labels and poses, stacked as the gallery holds them."""
+    x = torch.cat([views for views, _, _ in blocks])
+    labels = torch.tensor([label for _, label, angles in blocks for _ in angles])
+    poses = torch.tensor([a for _, _, angles in blocks for a in angles], dtype=x.dtype)
+    return x, labels, poses
 
 
-def test_stack_gallery_takes_the_views_dtype() -> None:
-    _, _, poses = stack_gallery([(_views(2, 0).double(), 0, [0.0, 1.0])])
-    assert poses.dtype == torch.float64
-
-
-@pytest.mark.parametrize("unit_norm", [True, False])
-def test_fit_projection_is_the_eigenspace_of_the_gallery(unit_norm: bool) -> None:
-    x = _views(12, 2)
-    projection = fit_projection(x, 4, unit_norm=unit_norm)
-    assert isinstance(projection, EigenProjection)
-    space = Eigenspace(4).fit(unit_rows(x) if unit_norm else x.flatten(1))
-    torch.testing.assert_close(projection.components, space.components_, atol=0, rtol=0)
-    assert projection.image_shape == (1, 6, 5)
-    want = (unit_rows(x) if unit_norm else x.flatten(1)) - space.mean_
-    torch.testing.assert_close(projection(x), want @ space.components_.T)
-
-
-def test_fit_projection_with_a_kernel() -> None:
-    projection = fit_projection(_views(12, 3), 3, kernel="rbf", gamma="median")
-    assert isinstance(projection, KernelProjection)
-
-
-def test_build_recognizer_finds_every_gallery_view() -> None:
-    x, labels, poses = stack_gallery([(_views(4, 4), 0, [0.0, 1.0, 2.0, 3.0]), (_views(4, 5), 1, [0.0] * 4)])
-    rec = build_recognizer(x, labels, poses, 7, label_names=["a", "b"])
-    assert rec.label_names == ["a", "b"]
-    result = rec.predict(x)
-    assert result.labels.tolist() == labels.tolist()
-    assert result.poses.tolist() == poses.tolist()
+def _recognizer(blocks: list[tuple[torch.Tensor, int, list[float]]], k: int) -> NearestNeighborRecognizer:
+    """The recognizer over the blocks' views themselves (no synthesis), as the pipeline builds it."""
+    est = FewViewEigenspace(k, synth=None).fit(
+        [views for views, _, _ in blocks],
+        [angles for _, _, angles in blocks],
+        labels=[label for _, label, _ in blocks],
+    )
+    return est.recognizer_
 
 
 def test_score_counts_and_pose_errors() -> None:
-    x, labels, poses = stack_gallery(
-        [(_views(3, 6), 0, [170.0, 175.0, 180.0]), (_views(3, 7), 1, [0.0, 5.0, 10.0])]
-    )
-    rec = build_recognizer(x, labels, poses, 5)
+    blocks = [(_views(3, 6), 0, [170.0, 175.0, 180.0]), (_views(3, 7), 1, [0.0, 5.0, 10.0])]
+    x, _labels, _poses = _gallery(blocks)
+    rec = _recognizer(blocks, 5)
     truth_0 = torch.tensor([-170.0, 175.0, 180.0])  # the first one 20 degrees off, or 340 unwrapped
     tests = [("first", 0, x[:3], truth_0), ("second", 1, x[[0, 4, 5]], torch.tensor([0.0, 5.0, 10.0]))]
     wrapped = score(rec, tests, wrap=True)
@@ -74,8 +52,9 @@ def test_score_counts_and_pose_errors() -> None:
 
 
 def test_score_without_a_correct_view_has_no_pose_error() -> None:
-    x, labels, poses = stack_gallery([(_views(2, 8), 0, [0.0, 1.0]), (_views(2, 9), 1, [0.0, 1.0])])
-    rec = build_recognizer(x, labels, poses, 3)
+    blocks = [(_views(2, 8), 0, [0.0, 1.0]), (_views(2, 9), 1, [0.0, 1.0])]
+    x, _labels, poses = _gallery(blocks)
+    rec = _recognizer(blocks, 3)
     result = score(rec, [("wrong", 1, x[:2], poses[:2])])
     assert result.accuracy == 0.0 and result.per_object == {"wrong": 0.0}
     assert math.isnan(result.pose_mae_deg)
@@ -99,8 +78,9 @@ def test_score_runs_the_pose_function_over_worker_threads(workers: int) -> None:
     same scores as in this thread; each call sees the correctly recognized views of one
     object only."""
     blocks = [(_views(4, 20 + k), k, [10.0 * k + j for j in range(4)]) for k in range(5)]
-    x, labels, poses = stack_gallery(blocks)
-    rec = build_recognizer(x, labels, poses, 6)
+    blocks = blocks
+    x, labels, poses = _gallery(blocks)
+    rec = _recognizer(blocks, 6)
     tests = _pose_tests(x, labels, poses)
     tests[2] = ("obj2", 3, tests[2][2], tests[2][3])  # recognized as 2, scored as 3: no view counts
     calls: list[tuple[list[int], str]] = []
@@ -124,8 +104,9 @@ def test_score_runs_the_pose_function_over_worker_threads(workers: int) -> None:
 
 
 def test_score_raises_a_pose_functions_error_from_a_worker() -> None:
-    x, labels, poses = stack_gallery([(_views(3, 30 + k), k, [0.0, 1.0, 2.0]) for k in range(3)])
-    rec = build_recognizer(x, labels, poses, 4)
+    blocks = [(_views(3, 30 + k), k, [0.0, 1.0, 2.0]) for k in range(3)]
+    x, labels, poses = _gallery(blocks)
+    rec = _recognizer(blocks, 4)
 
     def pose_fn(views: torch.Tensor, got: torch.Tensor, rough: torch.Tensor) -> torch.Tensor:
         raise ValueError(f"cannot place object {int(got[0])}")
@@ -135,7 +116,8 @@ def test_score_raises_a_pose_functions_error_from_a_worker() -> None:
 
 
 def test_score_checks_workers() -> None:
-    x, labels, poses = stack_gallery([(_views(2, 40), 0, [0.0, 1.0])])
-    rec = build_recognizer(x, labels, poses, 1)
+    blocks = [(_views(2, 40), 0, [0.0, 1.0])]
+    x, _labels, poses = _gallery(blocks)
+    rec = _recognizer(blocks, 1)
     with pytest.raises(ValueError, match="workers"):
         score(rec, [("a", 0, x, poses)], workers=-1)

@@ -34,7 +34,7 @@ def test_json_round_trip_and_bad_records() -> None:
     ]:
         with pytest.raises(ValueError, match=f"m.pt has a damaged preprocessing record: .*{match}"):
             Preprocessing.from_json({**record, key: value}, "m.pt")
-    with pytest.raises(ValueError, match="damaged preprocessing record: 'channels'"):
+    with pytest.raises(ValueError, match="damaged preprocessing record: 'channels' is missing"):
         Preprocessing.from_json({k: v for k, v in record.items() if k != "channels"}, "m.pt")
     with pytest.raises(ValueError, match=r"size must be \(H, W\) with ints >= 1, got \(0, 4\)"):
         Preprocessing((0, 4), 1)

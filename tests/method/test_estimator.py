@@ -187,7 +187,7 @@ def test_hyperparameters_are_checked_by_fit(
         (rand(2, 2, 1, 8, 8), [0.0], None, ValueError, "one angle per seed view"),
         (rand(2, 2, 1, 8, 8), [[0.0, 10.0]], None, ValueError, "one list of angles per object"),
         (rand(2, 2, 1, 8, 8), [0.0, float("nan")], None, ValueError, "finite"),
-        (rand(2, 2, 1, 8, 8), [0.0, 10.0], [1], ValueError, "one int per object"),
+        (rand(2, 2, 1, 8, 8), [0.0, 10.0], [1], ValueError, "one int or name per object"),
         (rand(2, 1, 1, 8, 8), [0.0], None, ValueError, "V >= 2"),
         (rand(2, 2, 1, 8, 8), [0.0, 180.0], None, ValueError, "180"),
     ],

@@ -248,7 +248,7 @@ def test_repr() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        (dict(degrees=-5.0), ValueError, r"degrees=-5.0 .* must be >= 0"),
+        (dict(degrees=-5.0), ValueError, r"degrees=-5.0 must be a finite number >= 0"),
         (dict(degrees=(10.0, 5.0)), ValueError, r"-90 < lo <= hi < 90"),
         (dict(degrees=(-95.0, 5.0)), ValueError, r"-90 < lo <= hi < 90"),
         (dict(degrees=(1.0, 2.0, 3.0)), ValueError, "a pair"),

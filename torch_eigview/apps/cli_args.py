@@ -15,6 +15,7 @@ from typing import TypeVar
 
 __all__ = [
     "MIN_OPSET",
+    "HelpFormatter",
     "add_quiet",
     "add_threads",
     "bounded_int_arg",
@@ -33,6 +34,25 @@ __all__ = [
 T = TypeVar("T")
 
 MIN_OPSET = 18  # what torch_eigview.io.onnx exports
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Every option's help ends with its default, where it has one to show (not a flag
+    that is off, not an option that is unset by default); descriptions keep their lines."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        shown = default not in (None, False, argparse.SUPPRESS) and "%(default)" not in text
+        if not action.option_strings or not shown or action.help == argparse.SUPPRESS:
+            return action.help
+        if isinstance(default, (list, tuple)):
+            return (
+                f"{text} (default: {' '.join(f'{v:g}' if isinstance(v, float) else str(v) for v in default)})"
+            )
+        if isinstance(default, float):
+            return f"{text} (default: {default:g})"
+        return f"{text} (default: %(default)s)"
 
 
 def components_arg(text: str) -> int | float:
@@ -84,9 +104,9 @@ def pose_step_arg(text: str) -> float:
     return value
 
 
-def bounded_int_arg(flag: str, minimum: int, limit: tuple[str, int] | None = None) -> Callable[[str], int]:
-    """An argparse type: an int >= ``minimum`` and at most ``limit`` (an environment variable
-    that raises it, and its default), the error naming ``flag``."""
+def bounded_int_arg(flag: str, minimum: int, limit: str | None = None) -> Callable[[str], int]:
+    """An argparse type: an int >= ``minimum`` and at most the :mod:`torch_eigview.config`
+    limit named ``limit``, the error naming ``flag``."""
 
     def parse(text: str) -> int:
         try:
@@ -96,10 +116,10 @@ def bounded_int_arg(flag: str, minimum: int, limit: tuple[str, int] | None = Non
         if value < minimum:
             raise argparse.ArgumentTypeError(f"{flag}={value} must be >= {minimum}")
         if limit is not None:
-            from torch_eigview.check import check_limit  # imports torch: not on predict's path
+            from torch_eigview.config import check_limit
 
             try:
-                check_limit(value, flag, "pixels per image side", *limit)
+                check_limit(value, flag, "pixels per image side", limit)
             except ValueError as exc:
                 raise argparse.ArgumentTypeError(str(exc)) from None
         return value
@@ -174,9 +194,9 @@ def add_threads(parser: argparse.ArgumentParser) -> None:
         type=threads_arg,
         default=None,
         metavar="N",
-        help="torch intra-op threads (default: 1, since a second thread gains little here and spins "
-        "when another process keeps the cores busy; a large eigen step takes the CPUs other "
-        "processes leave idle)",
+        help="torch intra-op threads; by default 1, since a second thread gains little here and spins "
+        "when another process keeps the cores busy, and a large eigen step takes the CPUs other "
+        "processes leave idle",
     )
 
 

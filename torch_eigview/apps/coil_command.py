@@ -11,6 +11,7 @@ import math
 from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
+    HelpFormatter,
     add_quiet,
     add_threads,
     components_arg,
@@ -22,7 +23,7 @@ from torch_eigview.apps.cli_args import (
     progress_bar,
     workers_arg,
 )
-from torch_eigview.apps.view_inputs import add_background_arguments, background_fields, model_of_background
+from torch_eigview.apps.view_options import add_background_arguments, background_fields
 from torch_eigview.files import check_outputs, write_json
 
 if TYPE_CHECKING:
@@ -37,32 +38,43 @@ __all__ = ["add_coil_command", "add_synthesis_arguments", "format_table", "run_c
 
 def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Adds ``eigview coil`` and its options to the command's subparsers."""
-    coil = sub.add_parser("coil", help="the COIL recognition experiment (paper Fig. 4(b))")
+    coil = sub.add_parser(
+        "coil",
+        help="the paper's recognition experiment (Fig. 4(b)) on a folder of COIL-format images",
+        description="Seed views of every object in a COIL-format folder (obj{O}__{P}.png), the views "
+        "between and beyond them synthesized, one eigenspace over all objects, and every real view over "
+        "a test range recognized by its nearest gallery view; prints the per-object accuracy.",
+        formatter_class=HelpFormatter,
+    )
     coil.add_argument(
-        "--root",
+        "--folder",
+        metavar="DIR",
         default=None,
-        help="folder of obj{O}__{P}.png images (COIL-20 or COIL-100); default: coil-20-proc/ in "
-        "$TORCH_EIGVIEW_DATA, else ../shared/data/coil-20-proc beside the checkout",
+        help="folder of obj{O}__{P}.png images (COIL-20, COIL-100 or the like); by default coil-20-proc/ "
+        "in the data home (TORCH_EIGVIEW_DATA, else ~/torch_eigview_data)",
     )
     coil.add_argument(
         "--alpha",
         type=finite_arg("--alpha"),
         default=None,
-        help="angle between seed views, degrees (required without --seeds)",
+        help="angle between seed views, degrees (required without --circle)",
     )
     coil.add_argument(
-        "--center", type=finite_arg("--center"), default=0.0, help="pose of the first seed view, degrees"
+        "--center",
+        type=finite_arg("--center"),
+        default=0.0,
+        help="pose of the first seed view and centre of the test range, degrees",
     )
     coil.add_argument(
-        "--views", type=int, default=None, choices=(2, 3), help="seed views per object (default 2)"
+        "--views", type=int, default=2, choices=(2, 3), help="seed views per object, alpha apart"
     )
     coil.add_argument(
-        "--seeds",
+        "--circle",
         type=int,
         default=None,
         metavar="M",
-        help="the full circle: M seed views 360/M degrees apart from --center, every sector synthesized, "
-        "every other pose tested (instead of --alpha and --views)",
+        help="the full circle instead of --alpha and --views: M seed views 360/M degrees apart from "
+        "--center, every sector synthesized, every other pose tested",
     )
     coil.add_argument(
         "--pose",
@@ -70,22 +82,7 @@ def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         default="nearest",
         help="the reported pose: the nearest gallery view's, interpolated on the appearance "
         "manifold between it and its neighbours (Murase and Nayar), or that measured again by "
-        "geometry against the recognized object's seed views (Eq. 2 over two flows per view, "
-        "one object per --workers thread: about 0.13 s a view on two cores); default nearest",
-    )
-    coil.add_argument(
-        "--dense-step",
-        type=finite_arg("--dense-step"),
-        default=None,
-        metavar="S",
-        help="with --seeds and --method dense: real views every S degrees (default about 180/M)",
-    )
-    coil.add_argument(
-        "--overlap",
-        type=finite_arg("--overlap"),
-        default=None,
-        metavar="DEG",
-        help="with --seeds: degrees each seed pair extrapolates past its seeds, below 90 - 360/M (default 0)",
+        "geometry against the recognized object's seed views (Eq. 2 over two flows per view)",
     )
     _add_method_arguments(coil)
 
@@ -98,37 +95,53 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         nargs=3,
         default=(-20.0, 20.0, 1.0),
         metavar=("START", "STOP", "STEP"),
-        help="synthesized angles for two seed views; each further seed extends the range by alpha",
+        help="synthesized angles from the first seed, degrees, for two seed views; each further seed "
+        "extends the range by alpha; with --circle only STEP is used",
     )
     coil.add_argument(
-        "--test", type=finite_arg("--test"), nargs=2, default=(-45.0, 45.0), metavar=("START", "STOP")
+        "--test",
+        type=finite_arg("--test"),
+        nargs=2,
+        default=(-45.0, 45.0),
+        metavar=("START", "STOP"),
+        help="test poses from --center, degrees: every real view between them (every other pose with --circle)",
     )
     coil.add_argument(
-        "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
+        "-k", "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
     )
-    coil.add_argument("--method", choices=("nvs", "sparse", "dense"), default="nvs")
-    coil.add_argument("--objects", type=objects_arg, default=None, help="e.g. 1-20 or 1,3,5-7 (default: all)")
+    coil.add_argument(
+        "--method",
+        choices=("nvs", "sparse", "dense"),
+        default="nvs",
+        help="the gallery: nvs, views synthesized from the seeds (the paper's method); the baselines "
+        "sparse, the seed views alone, and dense, every real view over the synthesized range",
+    )
+    coil.add_argument(
+        "--objects", type=objects_arg, default=None, help="object ids, e.g. 1-20 or 1,3,5-7; all by default"
+    )
     add_synthesis_arguments(coil)
     coil.add_argument(
         "--pose-unit",
         choices=("auto", "index", "degrees"),
         default="auto",
-        help="file pose P: an index (COIL-20, 5*P degrees), degrees (COIL-100), or auto (default)",
+        help="what a file's pose P is: an index (COIL-20: 5*P degrees), degrees (COIL-100), or auto",
     )
     coil.add_argument(
         "--pose-step",
         type=pose_step_arg,
         default=None,
         metavar="DEG",
-        help="degrees between pose indices (default 5, COIL-20's): 10 for a turntable of 36 views named "
-        "obj1__0.png .. obj1__35.png",
+        help="degrees between pose indices, 5 (COIL-20's) by default: 10 for a turntable of 36 views "
+        "named obj1__0.png .. obj1__35.png",
     )
     add_background_arguments(
         coil, auto="auto: the foreground estimated from each image's border colours (backdrop and table)"
     )
     coil.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     coil.add_argument("--json", metavar="FILE", help="write the results as JSON")
-    coil.add_argument("--save", metavar="FILE", help="write the fitted eigenspace and gallery")
+    coil.add_argument(
+        "--save", metavar="FILE", help="write the fitted model (for eigview evaluate, predict and export)"
+    )
     coil.add_argument(
         "--kernel",
         choices=("rbf", "poly", "cosine", "linear"),
@@ -136,7 +149,10 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         help="kernel PCA instead of the linear eigenspace (not with --save)",
     )
     coil.add_argument(
-        "--gamma", type=gamma_arg, default=None, help="kernel gamma, or 'median' (rbf; default 1/N)"
+        "--gamma",
+        type=gamma_arg,
+        default=None,
+        help="the kernel's gamma, or 'median' (rbf: 1/median squared distance); 1/N by default",
     )
     coil.add_argument(
         "--device",
@@ -151,16 +167,16 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         default="auto",
         metavar="N",
         help="workers that synthesize the objects (as threads, they also measure --pose three-view), "
-        "one object and one torch thread each; auto "
-        "(default): one thread per CPU, or with --worker-kind process one process per CPU when the "
-        "synthesis is large enough to repay their start-up (the full circle), else none",
+        "one object and one torch thread each; auto: one thread per CPU, or with --worker-kind "
+        "process one process per CPU when the synthesis is large enough to repay their start-up, "
+        "else none",
     )
     coil.add_argument(
         "--worker-kind",
         choices=("auto", "thread", "process"),
         default="auto",
         help="threads of this process (the torch flows and the warp release the GIL) or spawned "
-        "processes (for the scikit-image flows, which hold it); auto (default): processes for "
+        "processes (for the scikit-image flows, which hold it); auto: processes for "
         "--flow ilk and tvl1-skimage, else threads",
     )
     add_quiet(coil)
@@ -179,15 +195,15 @@ def add_synthesis_arguments(parser: argparse.ArgumentParser) -> None:
             "guided",
         ),  # geometry.flow.METHODS, without importing torch
         default="guided",
-        help="correspondences: the row matcher's epipolar matches refined by TV-L1 (guided, default: "
-        "seeds far apart in angle), TV-L1 optical flow in torch (tvl1) or scikit-image's (tvl1-skimage, "
-        "the reference), scikit-image's ILK flow, or semi-global matching along rows (rows)",
+        help="correspondences: the row matcher's epipolar matches refined by TV-L1 (guided: seeds far "
+        "apart in angle), TV-L1 optical flow in torch (tvl1) or scikit-image's (tvl1-skimage, the "
+        "reference), scikit-image's ILK flow, or semi-global matching along rows (rows)",
     )
     parser.add_argument(
         "--elevation",
         type=elevation_arg,
         default="auto",
-        help="camera elevation, degrees, or 'auto' (default)",
+        help="camera elevation, degrees, or auto: fitted per seed pair from the vertical flow",
     )
     parser.add_argument(
         "--blend",
@@ -205,10 +221,7 @@ def add_synthesis_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("auto", "on", "off"),
         default="auto",
         help="size-normalize synthesized views as a size-normalized data set's (COIL's) are: auto "
-        "(default) when every seed view's object fills the frame",
-    )
-    parser.add_argument(
-        "--no-extent", dest="extent", action="store_const", const="off", help="the same as --extent off"
+        "when every seed view's object fills the frame",
     )
 
 
@@ -243,53 +256,49 @@ def format_table(result: CoilResult, title: str) -> str:
 
 def _check_circle_flags(args: argparse.Namespace) -> None:
     """The flag combinations of the full circle that need no folder to refuse."""
-    if args.seeds is None:
+    if args.circle is None:
         if args.alpha is None:
-            raise ValueError("--alpha is required (the angle between seed views), unless --seeds is given")
-        for flag, value in (("--dense-step", args.dense_step), ("--overlap", args.overlap)):
-            if value is not None:
-                raise ValueError(f"{flag} {value:g} needs --seeds (the full circle)")
+            raise ValueError("--alpha is required (the angle between seed views), unless --circle is given")
         return
-    if args.seeds < 2:
-        raise ValueError(f"--seeds={args.seeds} must be >= 2")
-    if args.views is not None:
+    if args.circle < 2:
+        raise ValueError(f"--circle={args.circle} must be >= 2")
+    if args.views != 2:
         raise ValueError(
-            f"--seeds {args.seeds} places its own seed views: it cannot take --views {args.views}"
+            f"--circle {args.circle} places its own seed views: it cannot take --views {args.views}"
         )
-    if args.alpha is not None and abs(args.alpha - 360.0 / args.seeds) > 1e-9:
+    if args.alpha is not None and abs(args.alpha - 360.0 / args.circle) > 1e-9:
         raise ValueError(
-            f"--alpha {args.alpha:g} contradicts --seeds {args.seeds} (seeds 360/{args.seeds} = "
-            f"{360.0 / args.seeds:g} degrees apart); leave --alpha out"
+            f"--alpha {args.alpha:g} contradicts --circle {args.circle} (seeds 360/{args.circle} = "
+            f"{360.0 / args.circle:g} degrees apart); leave --alpha out"
         )
-    if args.dense_step is not None and args.method != "dense":
-        raise ValueError(f"--dense-step {args.dense_step:g} needs --method dense, got --method {args.method}")
 
 
 def run_coil(args: argparse.Namespace) -> int:
+    from torch_eigview.datasets.background import background_rule
     from torch_eigview.datasets.coil import CoilFolder, find_coil_root
     from torch_eigview.evaluation.coil import CoilExperiment
     from torch_eigview.io.checkpoint import save_recognizer
 
     outputs = [("--json", args.json), ("--save", args.save)]
-    check_outputs(outputs, inputs=[("--root", args.root)])
+    check_outputs(outputs, inputs=[("--folder", args.folder)])
     background = background_fields(args)
     folder = CoilFolder(
-        find_coil_root(args.root),
+        find_coil_root(args.folder),
         pose_unit=args.pose_unit,
         pose_step=args.pose_step,
         device=_device(args.device),
-        background=model_of_background(**background),
+        background=background_rule(**background),
     )
     # An output inside the folder must not replace one of the images the run reads.
     check_outputs(
         outputs,
-        inputs=[("an image of --root", folder.path(o, p)) for o in folder.objects for p in folder.poses(o)],
+        inputs=[("an image of --folder", folder.path(o, p)) for o in folder.objects for p in folder.poses(o)],
     )
     _check_circle_flags(args)
     experiment = CoilExperiment(
-        alpha=args.alpha if args.alpha is not None else 360.0 / args.seeds,
+        alpha=args.alpha if args.alpha is not None else 360.0 / args.circle,
         center=args.center,
-        views=args.views or 2,
+        views=args.views,
         synth=tuple(args.synth),
         test=tuple(args.test),
         components=args.components,
@@ -299,25 +308,23 @@ def run_coil(args: argparse.Namespace) -> int:
         synthesis=synthesis_options(args),
         kernel=args.kernel,
         gamma=args.gamma,
-        seeds=args.seeds,
-        dense_step=args.dense_step,
+        seeds=args.circle,
         interpolate_pose=args.pose in ("interpolate", "three-view"),
         three_view_pose=args.pose == "three-view",
-        overlap=0.0 if args.overlap is None else args.overlap,
     )
     experiment.worker_kind = _worker_kind(args)
     experiment.workers = _workers(args, experiment, folder)
-    if args.seeds is not None:
-        experiment.circle(folder, args.objects, names=("--seeds", "--dense-step"))
+    if args.circle is not None:
+        experiment.circle(folder, args.objects, names=("--circle", "dense_step"))
     if args.kernel and args.save:
         raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
     result = experiment.run(folder, progress=progress_bar(args.quiet, f"{args.method} objects", "obj"))
-    if args.seeds is None:
+    if args.circle is None:
         title = (
             f"COIL {args.method}: alpha={args.alpha:g}, {experiment.views} seed views, center={args.center:g}"
         )
     else:
-        title = f"COIL {args.method}: full circle, {args.seeds} seed views from center={args.center:g}"
+        title = f"COIL {args.method}: full circle, {args.circle} seed views from center={args.center:g}"
     if args.kernel:
         title += f", kernel PCA ({args.kernel}, gamma={getattr(result.recognizer.projection, 'gamma', float('nan')):g})"
     print(format_table(result, title))

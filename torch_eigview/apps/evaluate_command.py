@@ -22,15 +22,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from torch_eigview.apps.cli_args import add_quiet, add_threads
-from torch_eigview.apps.predict import escape
-from torch_eigview.apps.view_inputs import (
+from torch_eigview.apps.cli_args import HelpFormatter, add_quiet, add_threads
+from torch_eigview.apps.prediction import escape
+from torch_eigview.apps.view_options import (
     add_manifest_arguments,
-    background_model,
     check_not_views,
-    label_table,
     load_manifest,
-    load_model,
     manifest_inputs,
 )
 from torch_eigview.files import check_outputs, write_json
@@ -39,6 +36,7 @@ if TYPE_CHECKING:
     import torch
 
     from torch_eigview.datasets.manifest import ViewEntry
+    from torch_eigview.io.model import Model
     from torch_eigview.io.preprocessing import Preprocessing
     from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
@@ -47,7 +45,13 @@ __all__ = ["Evaluation", "add_evaluate_command", "evaluate", "format_evaluation"
 
 def add_evaluate_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Adds ``eigview evaluate`` and its options to the command's subparsers."""
-    ev = sub.add_parser("evaluate", help="score a model (eigview fit) on the views of a manifest")
+    ev = sub.add_parser(
+        "evaluate",
+        help="score a model on the views of a manifest",
+        description="Every view of the manifest prepared as the model records and recognized; prints the "
+        "accuracy per object and in all, the pose error, and with --reject the rejection's rates.",
+        formatter_class=HelpFormatter,
+    )
     ev.add_argument(
         "--model", required=True, metavar="FILE", help="model file of eigview fit (or coil --save)"
     )
@@ -131,10 +135,11 @@ def _tests(
     """Per known object its readable views (B, C, H, W) and true poses (B,), read lazily."""
     import torch
 
+    from torch_eigview.datasets.background import background_rule
     from torch_eigview.datasets.image_views import read_view
-    from torch_eigview.evaluation.scoring import wrap_degrees
+    from torch_eigview.geometry.angles import wrap_degrees
 
-    background = background_model(prep)
+    background = background_rule(prep.background, prep.colour, prep.tolerance)
     for obj, entries in groups.items():
         images, poses = [], []
         for e in entries:
@@ -206,8 +211,7 @@ class _Rejections:
 
 
 def evaluate(
-    recognizer: NearestNeighborRecognizer,
-    prep: Preprocessing,
+    model: Model,
     entries: list[ViewEntry],
     *,
     skipped: list[dict[str, str]] | None = None,
@@ -217,8 +221,8 @@ def evaluate(
     """Recognizes and scores ``entries`` (a manifest's views) with a model and its preprocessing.
 
     Args:
-        recognizer: the model's recognizer; its label names are the object names.
-        prep: the model's preprocessing.
+        model: the loaded model (:func:`~torch_eigview.io.load_model`); its recognizer's
+            label names are the object names, its preprocessing prepares the views.
         entries: the views, grouped by object in the order of their first view.
         skipped: rows already left out (bad manifest lines); unreadable views are added.
         interpolate_pose: score the pose interpolated on the appearance manifold.
@@ -231,8 +235,9 @@ def evaluate(
     """
     from torch_eigview.evaluation.scoring import score
 
+    recognizer, prep = model.recognizer, model.preprocessing
     skipped = [] if skipped is None else skipped
-    table = label_table(recognizer)
+    table = model.label_table()
     groups: dict[str, list[ViewEntry]] = {}
     unknown: dict[str, int] = {}
     for e in entries:
@@ -305,8 +310,11 @@ def format_evaluation(ev: Evaluation, title: str) -> str:
 def run_evaluate(args: argparse.Namespace) -> int:
     """Runs ``eigview evaluate``; returns 0, or 1 when rows were skipped."""
     check_outputs([("--json", args.json)], inputs=[("--model", args.model), *manifest_inputs(args)])
-    recognizer, meta, prep = load_model(args.model)
-    if args.reject and not recognizer.rejects:
+    from torch_eigview.io.model import load_model
+
+    model = load_model(args.model)
+    meta = model.metadata
+    if args.reject and not model.recognizer.rejects:
         raise ValueError(
             f"--reject needs a model with calibrated rejection (eigview fit without --no-reject); "
             f"{args.model} has none"
@@ -333,8 +341,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 f"({', '.join(f'{a:g}' for a in seeds)} degrees) of {args.model}"
             )
     ev = evaluate(
-        recognizer,
-        prep,
+        model,
         entries,
         skipped=skipped,
         interpolate_pose=args.pose == "interpolate",

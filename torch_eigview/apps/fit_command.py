@@ -1,7 +1,7 @@
 """``eigview fit``: a recognizer from the seed views of any objects listed in a manifest.
 
-Per object, the views at the seed azimuths (``--seeds 0 10 [more]``, or ``--seeds M``: M
-views 360/M degrees apart from ``--center``) are picked from the manifest, the gallery is
+Per object, the views at the seed azimuths (``--seeds 0 10 [more]``, or ``--circle M``:
+M views 360/M degrees apart from ``--center``) are picked from the manifest, the gallery is
 synthesized from them (by default every degree from 20° before the first seed to 20° past
 the last; ``--synth`` as ``eigview coil`` takes it: two seeds, that range; more, Sec. 4.1's
 sectors, the range extended past the last seed; M: the whole circle), and one
@@ -14,12 +14,11 @@ names as label names and the seed azimuths, for ``eigview evaluate`` and ``eigvi
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
-from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
+    HelpFormatter,
     add_quiet,
     add_threads,
     bounded_int_arg,
@@ -36,11 +35,10 @@ from torch_eigview.apps.seed_plan import (
     seed_plan,
     synth_record,
 )
-from torch_eigview.apps.view_inputs import (
+from torch_eigview.apps.view_options import (
     add_background_arguments,
     add_manifest_arguments,
     background_fields,
-    background_model,
     check_not_views,
     load_manifest,
     manifest_inputs,
@@ -52,26 +50,37 @@ if TYPE_CHECKING:
 
     from torch_eigview.datasets.background import BackgroundModel
     from torch_eigview.datasets.manifest import ViewEntry
-    from torch_eigview.synthesis import SynthesisOptions
 
 __all__ = ["add_fit_command", "run_fit"]
 
 
 def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Adds ``eigview fit`` and its options to the command's subparsers."""
-    fit = sub.add_parser("fit", help="fit a recognizer from the seed views of the objects in a manifest")
+    fit = sub.add_parser(
+        "fit",
+        help="fit a recognizer from the seed views of the objects in a manifest",
+        description="Per object, its views at the seed azimuths are read from the manifest and the views "
+        "between and beyond them synthesized; one eigenspace and nearest-neighbour gallery over every "
+        "object are written to --out with the preprocessing its images need.",
+        formatter_class=HelpFormatter,
+    )
     add_manifest_arguments(fit)
-    fit.add_argument(
+    seeds = fit.add_mutually_exclusive_group(required=True)
+    seeds.add_argument(
         "--seeds",
         type=finite_arg("--seeds"),
         nargs="+",
-        required=True,
         metavar="DEG",
-        help="azimuths of the seed views, degrees (two or more: e.g. 0 10), or one integer M: "
-        "M seed views 360/M degrees apart from --center (the full circle)",
+        help="azimuths of the seed views, degrees: two or more, e.g. 0 10",
+    )
+    seeds.add_argument(
+        "--circle",
+        type=bounded_int_arg("--circle", 3),
+        metavar="M",
+        help="the full circle: M >= 3 seed views 360/M degrees apart from --center, every sector synthesized",
     )
     fit.add_argument(
-        "--center", type=finite_arg("--center"), default=0.0, help="with --seeds M: the first seed's azimuth"
+        "--center", type=finite_arg("--center"), default=0.0, help="with --circle: the first seed's azimuth"
     )
     fit.add_argument(
         "--synth",
@@ -80,13 +89,13 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=None,
         metavar=("START", "STOP", "STEP"),
         help="synthesized angles from the first seed for two seeds; each further seed extends the range "
-        "by its step; with --seeds M every STEP degrees round the circle (default: every degree from 20 "
+        "by its step; with --circle every STEP degrees round the circle (by default every degree from 20 "
         "before the first seed to 20 past the last, or round the circle; eigview coil's -20 20 1 is the "
         "paper's protocol)",
     )
     fit.add_argument(
         "--size",
-        type=bounded_int_arg("--size", 2, ("EIGVIEW_MAX_IMAGE_SIDE", 512)),  # the flow needs 2 x 2
+        type=bounded_int_arg("--size", 2, "max_image_side"),  # the flow needs 2 x 2
         nargs=2,
         default=None,
         metavar=("H", "W"),
@@ -124,7 +133,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar=("START", "STOP", "STEP"),
         help="angles from the first seed of the held-out views rejection is calibrated on, the gallery's "
         "angles left out: where the known objects will be seen (default: every 2.5 degrees from 45 before "
-        "the first seed to 45 past the last; with --seeds M the midpoints between gallery views all round)",
+        "the first seed to 45 past the last; with --circle the midpoints between gallery views all round)",
     )
     fit.add_argument("--out", required=True, metavar="FILE", help="the model file to write")
     add_quiet(fit)
@@ -140,35 +149,6 @@ def _rate_arg(text: str) -> float:
     if not 0.0 < value < 1.0:
         raise argparse.ArgumentTypeError(f"--reject-rate must be a number in (0, 1), got {text!r}")
     return value
-
-
-def _gallery(
-    seeds: tuple[torch.Tensor, torch.Tensor | None],
-    plan: SeedPlan,
-    options: SynthesisOptions,
-    obj: str,
-    held: list[float],
-) -> tuple[torch.Tensor, list[float], torch.Tensor]:
-    """One object's synthesized gallery views and their poses (degrees, unwrapped), and its
-    views at the ``held`` angles (from :func:`held_out_thetas`), from its seed views
-    (V, C, H, W) and their masks (V, H, W) or None (the brightness threshold)."""
-    from torch_eigview.synthesis import synthesize_circle, synthesize_views
-
-    views, masks = seeds
-    try:
-        if plan.thetas is None:
-            out = synthesize_circle(views, plan.step / (2 if held else 1), options, masks=masks)
-            if held:  # the gallery's views at multiples of step from their seed, the midpoints between
-                alpha = 360.0 / len(plan.azimuths)
-                half = ((out.thetas - out.pairs * alpha) / (plan.step / 2)).round().long() % 2 == 1
-                poses = [plan.first + t for t in out.thetas[~half].tolist()]
-                return out.views[~half], poses, out.views[half]
-        else:
-            out = synthesize_views(views, plan.alpha, plan.thetas + held, options, masks=masks)
-    except ValueError as exc:  # e.g. a flow that cannot match this object's seeds
-        raise ValueError(f"object {obj!r}: synthesis failed: {exc}") from exc
-    n = len(out.thetas) - len(held)
-    return out.views[:n], [plan.first + t for t in out.thetas[:n].tolist()], out.views[n:]
 
 
 def _read_seeds(
@@ -197,15 +177,40 @@ def _read_seeds(
     return views, None if background is None else torch.stack([mask[0] for _, mask in read])
 
 
+def _seed_angles(plan: SeedPlan) -> list[float]:
+    """The seed views' angles as the estimator takes them: from the first seed's wrapped
+    azimuth on, each the signed step from the one before (the gallery's poses are the
+    first plus the synthesized offsets)."""
+    if plan.thetas is None:
+        alpha = 360.0 / len(plan.azimuths)
+        return [plan.first + k * alpha for k in range(len(plan.azimuths))]
+    angles = [plan.first]
+    for step in plan.steps:
+        angles.append(angles[-1] + step)
+    return angles
+
+
 def run_fit(args: argparse.Namespace) -> int:
     """Runs ``eigview fit`` on parsed arguments; returns the exit status."""
-    from torch_eigview.evaluation.scoring import build_recognizer, stack_gallery, wrap_degrees
+    from torch_eigview.datasets.background import background_rule
+    from torch_eigview.geometry.angles import AROUND_SEEDS
     from torch_eigview.io.checkpoint import save_recognizer
     from torch_eigview.io.preprocessing import Preprocessing
+    from torch_eigview.method.estimator import FewViewEigenspace
+    from torch_eigview.scale.parallel import object_workers
+    from torch_eigview.synthesis import Circle
 
     check_outputs([("--out", args.out)], inputs=manifest_inputs(args))
     fields = background_fields(args)
-    plan = seed_plan(list(args.seeds), args.center, None if args.synth is None else tuple(args.synth))
+    plan = seed_plan(args.seeds, args.circle, args.center, None if args.synth is None else tuple(args.synth))
+    if plan.thetas is None and args.reject_poses is not None:
+        raise ValueError(
+            f"--reject-poses {' '.join(f'{v:g}' for v in args.reject_poses)} cannot be placed round the full "
+            "circle (--circle): its rejection is calibrated on the midpoints between gallery views"
+        )
+    given = None if args.reject_poses is None else tuple(args.reject_poses)
+    held_poses = None if args.reject_rate is None else reject_poses(plan, given)
+    held_out_thetas(plan, held_poses)  # names a bad --reject-poses before any image is read
     manifest = load_manifest(args)
     check_not_views([("--out", args.out)], manifest)
     objects = manifest.objects
@@ -221,67 +226,59 @@ def run_fit(args: argparse.Namespace) -> int:
     size, channels = size or (first.shape[2], first.shape[3]), args.channels or first.shape[1]
     unit_norm = not args.no_unit_norm
     prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm, **fields)
-    background = background_model(prep)
-    options = synthesis_options(args)
-
-    given = None if args.reject_poses is None else tuple(args.reject_poses)
-    held_poses = None if args.reject_rate is None else reject_poses(plan, given)
-    held = held_out_thetas(plan, held_poses)
-    held_views: list[torch.Tensor] = []
-
-    def gallery(obj: str) -> tuple[torch.Tensor, list[float], torch.Tensor]:
-        return _gallery(_read_seeds(picked[obj], size, channels, background), plan, options, obj, held)
-
-    def blocks() -> Iterator[tuple[torch.Tensor, int, list[float]]]:
-        from torch_eigview.scale.parallel import map_ordered, object_workers
-
-        loop = progress_bar(args.quiet, "fit objects", "obj")
-        # One thread per CPU, one object each (torch kernels release the GIL); in order.
-        workers = object_workers(0, 0, len(objects), kind="thread")
-        results = map_ordered(gallery, ((obj,) for obj in objects), workers, kind="thread")
-        with contextlib.closing(results):  # an error here ends the pool
-            for label, (_, (views, poses, held_out)) in enumerate(
-                zip(loop(objects) if loop else objects, results, strict=True)
-            ):
-                held_views.append(held_out)
-                yield views, label, poses
-
-    x, labels, poses = stack_gallery(blocks())
+    background = background_rule(prep.background, prep.colour, prep.tolerance)
+    read = [_read_seeds(picked[obj], size, channels, background) for obj in objects]
+    est = FewViewEigenspace(
+        args.components,
+        synth=Circle(plan.step)
+        if plan.thetas is None
+        else (AROUND_SEEDS if args.synth is None else tuple(args.synth)),
+        options=synthesis_options(args),
+        unit_norm=unit_norm,
+        reject_rate=args.reject_rate,
+        reject_poses=AROUND_SEEDS if given is None else given,
+        # One thread per CPU, a few objects each (torch's kernels release the GIL); in order.
+        workers=object_workers(0, 0, len(objects), kind="thread"),
+    )
     try:
-        recognizer = build_recognizer(
-            x, labels, wrap_degrees(poses), args.components, unit_norm=unit_norm, label_names=objects
+        est.fit(
+            [views for views, _ in read],
+            _seed_angles(plan),
+            labels=objects,
+            masks=[masks for _, masks in read],
+            progress=progress_bar(args.quiet, "fit objects", "obj"),
         )
     except ValueError as exc:
         if "exceeds the rank" not in str(exc):
             raise
         # The cause is the -k the command line chose (or its default), not an internal argument.
+        if plan.thetas is None:  # every step of each pair's sector [0, alpha)
+            per_object = len(plan.azimuths) * math.ceil(360.0 / len(plan.azimuths) / plan.step - 1e-9)
+        else:
+            per_object = len(plan.thetas)
         raise ValueError(
-            f"-k/--components {args.components:g} is more than the {x.shape[0]} gallery views allow ({exc}): "
+            f"-k/--components {args.components:g} is more than the {len(objects) * per_object} gallery views "
+            f"allow ({exc}): "
             "give a smaller -k, or more views (a smaller --synth step, more objects)"
         ) from exc
-    if args.reject_rate is not None:
-        import torch
-
-        from torch_eigview.method.rejection import calibrate_rejection
-
-        calibrate_rejection(recognizer, torch.cat(held_views).to(x.dtype), args.reject_rate)
+    n_views = int(est.gallery_labels_.shape[0])
     meta = {
         "command": "fit",
         "preprocessing": prep.to_json(),
         "seed_azimuths": plan.azimuths,
         "synth": synth_record(args.synth, plan),
-        "n_train_views": int(x.shape[0]),
+        "n_train_views": n_views,
         "reject_rate": args.reject_rate,
         "reject_poses": None if held_poses is None else list(held_poses),
         "manifest": manifest.name,
     }
-    save_recognizer(args.out, recognizer, meta)
-    k = recognizer.projection.n_components
+    save_recognizer(args.out, est.recognizer_, meta)
+    k = est.recognizer_.projection.n_components
     rejects = (
-        "" if args.reject_rate is None else f", rejection calibrated on {sum(map(len, held_views))} views"
+        "" if args.reject_rate is None else f", rejection calibrated on {est.n_calibration_views_} views"
     )
     print(
-        f"wrote {args.out}: {len(objects)} objects, {x.shape[0]} gallery views of (C, H, W)={tuple(x.shape[1:])}, "
+        f"wrote {args.out}: {len(objects)} objects, {n_views} gallery views of (C, H, W)={est.image_shape_}, "
         f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees{rejects}"
     )
     return 0

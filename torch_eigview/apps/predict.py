@@ -32,11 +32,11 @@ import math
 import os
 import sys
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from torch_eigview.apps.prediction import Prediction, escape
 from torch_eigview.files import check_output_path, write_json
 from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
 from torch_eigview.io.onnx_check import check_recognizer_graph
@@ -45,34 +45,9 @@ from torch_eigview.io.onnx_metadata import OnnxModelInfo
 from torch_eigview.io.preprocessing import prepare_array
 from torch_eigview.lazy import require
 
-__all__ = ["OnnxRecognizer", "Prediction", "add_arguments", "escape", "main", "read_info", "run"]
+__all__ = ["OnnxRecognizer", "add_arguments", "main", "read_info", "run"]
 
 _BATCH = 64
-
-
-@dataclass(frozen=True)
-class Prediction:
-    """One recognized image: its file, label name, pose (degrees) and eigenspace distance, and
-    whether the model's rejection took it for a known object (None: not asked)."""
-
-    image: str
-    label: str
-    pose: float
-    distance: float
-    known: bool | None = None
-
-    def to_json(self) -> dict[str, Any]:
-        out = {"image": self.image, "label": self.label, "pose": self.pose, "distance": self.distance}
-        if self.known is not None:
-            out["known"] = self.known
-        return out
-
-
-def escape(text: str) -> str:
-    """``text`` with control and other non-printable characters escaped as ``repr`` would
-    (``\\n``, ``\\x1b``, ``\\u2028``), so that a label name or a file name from a file cannot
-    forge output lines or send terminal escapes."""
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 class OnnxRecognizer:

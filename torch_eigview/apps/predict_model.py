@@ -13,10 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from torch_eigview.apps.predict import Prediction
-from torch_eigview.apps.view_inputs import background_model, label_table, load_model
+from torch_eigview.apps.prediction import Prediction
+from torch_eigview.datasets.background import background_rule
 from torch_eigview.datasets.image_views import read_view
-from torch_eigview.io.images import check_regular_file
+from torch_eigview.io.model import load_model
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 
 __all__ = ["ModelRecognizer"]
@@ -37,11 +37,10 @@ class ModelRecognizer:
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
-        self.path = os.fspath(path)
-        check_regular_file(self.path, "model")
-        self.recognizer, _, self.prep = load_model(self.path)
-        self.background = background_model(self.prep)
-        self._names = {label: name for name, label in label_table(self.recognizer).items()}
+        model = load_model(path)
+        self.path, self.recognizer, self.prep = model.path, model.recognizer, model.preprocessing
+        self.background = background_rule(self.prep.background, self.prep.colour, self.prep.tolerance)
+        self._names = {label: name for name, label in model.label_table().items()}
         self.info = OnnxModelInfo(
             kind="recognizer",
             image_shape=self.prep.image_shape,

@@ -43,14 +43,16 @@ class SeedPlan:
     steps: list[float] = field(default_factory=list)
 
 
-def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, float] | None) -> SeedPlan:
-    """The seed azimuths and gallery angles of ``--seeds``, ``--center`` and ``--synth``
-    (None: every degree from 20° before the first seed to 20° past the last,
-    :func:`~torch_eigview.geometry.angles.around_seeds`).
+def seed_plan(
+    seeds: list[float] | None, circle: int | None, center: float, synth: tuple[float, float, float] | None
+) -> SeedPlan:
+    """The seed azimuths and gallery angles of ``--seeds`` (or ``--circle``), ``--center``
+    and ``--synth`` (None: every degree from 20° before the first seed to 20° past the last,
+    :func:`~torch_eigview.geometry.angles.around_seeds`, or every degree round the circle).
 
     Raises:
-        ValueError: one value that is not an integer >= 3; listed seeds that repeat an
-            azimuth; a bad ``--synth`` range.
+        ValueError: fewer than two listed seeds; listed seeds that repeat an azimuth or lie
+            180 degrees apart; a bad ``--synth`` range.
     """
     from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
     from torch_eigview.geometry.angles import angle_range, around_seeds, wrap_angle
@@ -58,16 +60,16 @@ def seed_plan(seeds: list[float], center: float, synth: tuple[float, float, floa
     step = 1.0 if synth is None else synth[2]
     if synth is not None:
         angle_range(*synth, "--synth")  # names a bad range before any image is read
-    if len(seeds) == 1:
-        m = seeds[0]
-        if not (m.is_integer() and m >= 3):
-            raise ValueError(
-                f"--seeds {m:g}: one value is M, the number of seed views round the circle, an integer >= 3 "
-                "(M = 2 puts them 180 degrees apart, where Eq. 7's sin(alpha) is 0); or list two or more azimuths"
-            )
-        check_limit(m, "--seeds", "seed views round the circle", *VIEW_LIMIT)
-        azimuths = [(center + k * 360.0 / m) % 360.0 for k in range(int(m))]
-        return SeedPlan(azimuths, wrap_angle(center), 360.0 / m, None, step)
+    if circle is not None:
+        check_limit(circle, "--circle", "seed views round the circle", VIEW_LIMIT)
+        azimuths = [(center + k * 360.0 / circle) % 360.0 for k in range(circle)]
+        return SeedPlan(azimuths, wrap_angle(center), 360.0 / circle, None, step)
+    seeds = list(seeds or [])
+    if len(seeds) < 2:
+        raise ValueError(
+            f"--seeds {' '.join(f'{a:g}' for a in seeds)} needs two or more azimuths to synthesize from "
+            "(--circle M for M seed views round the whole circle)"
+        )
     steps = [wrap_angle(b - a) for a, b in itertools.pairwise(seeds)]
     if any(abs(s) < _TOL for s in steps):
         raise ValueError(f"--seeds {' '.join(f'{a:g}' for a in seeds)} repeats an azimuth")

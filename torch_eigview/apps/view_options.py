@@ -1,9 +1,11 @@
-"""What ``eigview fit``, ``evaluate`` and ``predict`` share: the manifest options, the model file.
+"""The options ``eigview fit``, ``evaluate`` and ``coil`` share: where the views are, and
+what their background is.
 
 A command's views come from a CSV manifest (``--manifest``) or a folder pattern
 (``--pattern`` under ``--root``), read by :class:`~torch_eigview.datasets.manifest.ViewManifest`;
-a model file is :func:`~torch_eigview.io.checkpoint.save_recognizer`'s, with the
-:class:`~torch_eigview.io.preprocessing.Preprocessing` that ``eigview fit`` recorded.
+``--background`` and ``--tolerance`` give the background rule that
+:func:`~torch_eigview.datasets.background_rule` turns into a
+:class:`~torch_eigview.datasets.background.BackgroundModel`.
 """
 
 from __future__ import annotations
@@ -13,26 +15,18 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from torch_eigview.apps.cli_args import finite_arg
-from torch_eigview.io.preprocessing import Preprocessing
 
 if TYPE_CHECKING:
-    from torch_eigview.datasets.background import BackgroundModel
     from torch_eigview.datasets.manifest import ViewManifest
-    from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
 __all__ = [
     "add_background_arguments",
     "add_manifest_arguments",
     "background_arg",
     "background_fields",
-    "background_model",
     "check_not_views",
-    "label_table",
     "load_manifest",
-    "load_model",
     "manifest_inputs",
-    "model_of_background",
-    "model_preprocessing",
 ]
 
 
@@ -118,25 +112,6 @@ def background_fields(args: argparse.Namespace) -> dict[str, Any]:
     return {"background": choice, "colour": None, "tolerance": tolerance}
 
 
-def background_model(prep: Preprocessing) -> BackgroundModel | None:
-    """The :class:`~torch_eigview.datasets.background.BackgroundModel` a preprocessing
-    record applies (background set to 0), or None for ``"keep"``."""
-    return model_of_background(prep.background, prep.colour, prep.tolerance)
-
-
-def model_of_background(
-    background: str, colour: tuple[float, ...] | None, tolerance: float | None
-) -> BackgroundModel | None:
-    """The :class:`~torch_eigview.datasets.background.BackgroundModel` of a background rule,
-    the fields of :func:`background_fields` or of a preprocessing record (background set
-    to 0), or None for ``"keep"``."""
-    from torch_eigview.datasets.background import BackgroundModel
-
-    if background == "keep":
-        return None
-    return BackgroundModel(background=colour, tolerance=tolerance)
-
-
 def manifest_inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:
     """The input files of the manifest options (an output must not overwrite one)."""
     return [("--manifest", args.manifest), ("--root", args.root)]
@@ -179,43 +154,3 @@ def load_manifest(args: argparse.Namespace, skipped: list[str] | None = None) ->
     if args.root is not None:
         raise ValueError(f"--root {args.root!r} goes with --pattern, not with --manifest")
     return ViewManifest.from_csv(args.manifest, skipped=skipped)
-
-
-def model_preprocessing(
-    recognizer: NearestNeighborRecognizer, meta: dict[str, Any], source: str
-) -> Preprocessing:
-    """The preprocessing ``eigview fit`` recorded in a model's metadata.
-
-    A model without one (``eigview coil --save``) takes images of its own (C, H, W) as
-    read, with the black background of the data it came from.
-    """
-    if "preprocessing" in meta:
-        prep = Preprocessing.from_json(meta["preprocessing"], source)
-        shape = recognizer.projection.image_shape
-        if shape is not None and prep.image_shape != tuple(shape):
-            raise ValueError(
-                f"{source}: its preprocessing gives {prep.image_shape}, its eigenspace takes {shape}"
-            )
-        return prep
-    shape = recognizer.projection.image_shape
-    if shape is None or shape[0] not in (1, 3):
-        raise ValueError(
-            f"{source} records no preprocessing and takes images {shape}: write it with eigview fit"
-        )
-    return Preprocessing((shape[1], shape[2]), shape[0], unit_norm=bool(recognizer.projection.unit_norm))
-
-
-def label_table(recognizer: NearestNeighborRecognizer) -> dict[str, int]:
-    """Object name -> label value: the recognizer's label names (one per distinct label, in
-    sorted label order), or each label's own number (``eigview coil --save``: COIL ids)."""
-    distinct = sorted(set(recognizer.labels.tolist()))
-    names = recognizer.label_names or [str(label) for label in distinct]
-    return dict(zip(names, distinct, strict=True))
-
-
-def load_model(path: str) -> tuple[NearestNeighborRecognizer, dict[str, Any], Preprocessing]:
-    """A model file's recognizer (checksum verified), metadata and preprocessing."""
-    from torch_eigview.io.checkpoint import load_recognizer
-
-    recognizer, meta = load_recognizer(path)
-    return recognizer, meta, model_preprocessing(recognizer, meta, f"model {path}")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from torch_eigview.datasets.backdrop import Backdrop
-from torch_eigview.datasets.background import BackgroundModel, set_background
+from torch_eigview.datasets.background import BackgroundModel, background_rule, set_background
 from torch_eigview.datasets.cameras import (
     CAMERAS,
     AffineCamera,
@@ -15,8 +15,8 @@ from torch_eigview.datasets.coil import (
     DATA_ENV,
     CoilFolder,
     PoseStepWarning,
-    default_data_root,
     find_coil_root,
+    get_data_home,
     parse_object_spec,
 )
 from torch_eigview.datasets.correspondence import (
@@ -29,11 +29,13 @@ from torch_eigview.datasets.correspondence import (
 from torch_eigview.datasets.image_views import ViewDataset, read_view
 from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
 from torch_eigview.datasets.renderer import Render, render, render_views
+from torch_eigview.datasets.scene import MASKS, SyntheticScene
 from torch_eigview.datasets.shapes import SHAPES, SyntheticObject, make_object
 
 __all__ = [
     "CAMERAS",
     "DATA_ENV",
+    "MASKS",
     "SHAPES",
     "AffineCamera",
     "Backdrop",
@@ -44,14 +46,16 @@ __all__ = [
     "PoseStepWarning",
     "Render",
     "SyntheticObject",
+    "SyntheticScene",
     "ViewCorrespondence",
     "ViewDataset",
     "ViewEntry",
     "ViewManifest",
-    "default_data_root",
+    "background_rule",
     "exact_correspondence",
     "exact_correspondence_2d",
     "find_coil_root",
+    "get_data_home",
     "make_camera",
     "make_object",
     "parse_object_spec",

@@ -29,7 +29,7 @@ import torch
 from torch_eigview.check import check_finite, check_float_tensor, check_int, check_number, check_positive
 from torch_eigview.io.foreground import estimate_foreground
 
-__all__ = ["BackgroundModel", "border_pixels", "check_masks", "set_background"]
+__all__ = ["BackgroundModel", "background_rule", "border_pixels", "check_masks", "set_background"]
 
 
 def check_masks(masks: object, images: torch.Tensor, name: str = "masks") -> torch.Tensor:
@@ -169,6 +169,8 @@ class BackgroundModel:
             raise ValueError(
                 f"background={self.background!r} must hold C={c} values, one per channel of images"
             )
+        if min(h, w) == 0:
+            raise ValueError(f"images have no pixels to tell their foreground from: (H, W)=({h}, {w})")
         if 2 * self.border >= min(h, w):
             raise ValueError(
                 f"border={self.border} must be less than half the image side min(H, W)={min(h, w)}"
@@ -204,3 +206,20 @@ class BackgroundModel:
         if self.fill is None:
             return images, fg
         return set_background(images, fg, self.fill), fg
+
+
+def background_rule(
+    background: str, colour: tuple[float, ...] | None = None, tolerance: float | None = None
+) -> BackgroundModel | None:
+    """The :class:`BackgroundModel` of a background rule, as ``--background`` and a model's
+    :class:`~torch_eigview.io.preprocessing.Preprocessing` record name it (``"keep"``,
+    ``"auto"`` or ``"colour"`` with its colour and tolerance, in [0, 1]); None for
+    ``"keep"``, which leaves the pixels as read.
+
+    Example:
+        >>> background_rule("keep") is None, background_rule("auto").background
+        (True, None)
+    """
+    if background == "keep":
+        return None
+    return BackgroundModel(background=colour, tolerance=tolerance)

@@ -39,8 +39,8 @@ __all__ = [
     "DATA_ENV",
     "CoilFolder",
     "PoseStepWarning",
-    "default_data_root",
     "find_coil_root",
+    "get_data_home",
     "parse_object_spec",
 ]
 
@@ -49,31 +49,38 @@ DATA_ENV = "TORCH_EIGVIEW_DATA"
 
 # re.ASCII: ``\d`` alone would also accept non-ASCII digits such as "١-3".
 _SPEC_RE = re.compile(r"\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?", re.ASCII)
-# A source checkout keeps its data beside it, in ../shared/data (this file is
-# <checkout>/torch_eigview/datasets/coil.py); an installed copy has no such folder.
-_CHECKOUT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
 
-def default_data_root() -> Path:
-    """The folder that holds the data sets: ``$TORCH_EIGVIEW_DATA``, else ``../shared/data`` beside the checkout.
+def get_data_home(data_home: str | os.PathLike[str] | None = None) -> Path:
+    """The folder that holds the data sets, as scikit-learn's ``get_data_home`` finds it:
+    ``data_home`` when given, else the ``TORCH_EIGVIEW_DATA`` environment variable, else
+    ``~/torch_eigview_data``.
 
-    An empty ``TORCH_EIGVIEW_DATA`` counts as unset. The folder need not exist.
+    An empty ``TORCH_EIGVIEW_DATA`` counts as unset. The folder need not exist; nothing is
+    downloaded into it: put the data sets there yourself (COIL-20's ``coil-20-proc/``).
+
+    Example:
+        >>> str(get_data_home("/data"))
+        '/data'
     """
+    if data_home is not None:
+        return Path(data_home).expanduser()
     env = os.environ.get(DATA_ENV, "")
-    return Path(env).expanduser() if env else _CHECKOUT_DATA
+    return Path(env).expanduser() if env else Path("~/torch_eigview_data").expanduser()
 
 
-def find_coil_root(root: str | os.PathLike[str] | None = None, name: str = "coil-20-proc") -> Path:
-    """The folder of COIL images to read: ``root`` when given, else ``default_data_root() / name``.
-
-    The precedence is the commands' and examples': their ``--root`` flag, then the
-    ``TORCH_EIGVIEW_DATA`` environment variable (a folder holding ``coil-20-proc/``), then
-    ``../shared/data/coil-20-proc`` beside the checkout.
+def find_coil_root(
+    root: str | os.PathLike[str] | None = None,
+    name: str = "coil-20-proc",
+    data_home: str | os.PathLike[str] | None = None,
+) -> Path:
+    """The folder of COIL images to read: ``root`` when given, else ``get_data_home(data_home) / name``.
 
     Args:
         root: The COIL folder itself (``obj{O}__{P}.png`` files), or None for the default.
-        name: The folder under the data root when ``root`` is None (``"coil-20-proc"``
+        name: The folder under the data home when ``root`` is None (``"coil-20-proc"``
             for the processed COIL-20, e.g. ``"coil-100"`` for COIL-100).
+        data_home: the data home (:func:`get_data_home`).
 
     Returns:
         The folder; it exists (whether it holds COIL files, :class:`CoilFolder` checks).
@@ -81,30 +88,33 @@ def find_coil_root(root: str | os.PathLike[str] | None = None, name: str = "coil
     Raises:
         TypeError: ``root`` is not a path or ``name`` not a str.
         ValueError: The folder does not exist; the message says which folder was looked
-            for, why there, and the three ways to point at the images.
+            for, why there, and the ways to point at the images.
     """
     if root is not None and not isinstance(root, (str, os.PathLike)):
         raise TypeError(f"root must be a str, a path or None, got {type(root).__name__}")
     if not isinstance(name, str):
         raise TypeError(f"name must be a str such as 'coil-20-proc', got {type(name).__name__}")
-    path = Path(root) if root is not None else default_data_root() / name
+    home = get_data_home(data_home)
+    path = Path(root) if root is not None else home / name
     if path.is_dir():
         return path
     if root is not None:
-        source = "given with --root"
+        source = "given as the folder itself"
+    elif data_home is not None:
+        source = "under the data_home given"
     elif os.environ.get(DATA_ENV):
         source = f"from {DATA_ENV}={os.environ[DATA_ENV]}"
     else:
-        source = f"the default, {DATA_ENV} being unset"
+        source = f"the default data home, {DATA_ENV} being unset"
     raise ValueError(
-        f"COIL images not found: root={str(path)!r} ({source}) must be an existing directory of "
-        f"obj{{O}}__{{P}}.png images. Put the {name}/ folder in {default_data_root()}, or set "
-        f"{DATA_ENV} to the folder that holds {name}/, or pass the folder itself with --root DIR."
+        f"COIL images not found: {str(path)!r} ({source}) must be an existing directory of "
+        f"obj{{O}}__{{P}}.png images. Put the {name}/ folder in {home}, or set {DATA_ENV} to the "
+        f"folder that holds {name}/, or pass the folder itself (eigview coil --folder DIR)."
     )
 
 
 # Object ids one selection may name (COIL-100 has 100).
-OBJECT_LIMIT = ("EIGVIEW_MAX_OBJECTS", 100_000)
+OBJECT_LIMIT = "max_objects"
 
 
 def parse_object_spec(spec: str) -> list[int]:
@@ -135,7 +145,7 @@ def parse_object_spec(spec: str) -> list[int]:
         if hi < lo:
             raise ValueError(f"spec={spec!r} holds the reversed range {lo}-{hi} (must be low-high)")
         # Bounded before the set is built: "1-99999999999" would fill the memory.
-        check_limit(len(ids) + hi - lo + 1, f"spec={spec!r}", "object ids", *OBJECT_LIMIT)
+        check_limit(len(ids) + hi - lo + 1, f"spec={spec!r}", "object ids", OBJECT_LIMIT)
         ids.update(range(lo, hi + 1))
     return sorted(ids)
 

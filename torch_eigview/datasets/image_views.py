@@ -32,7 +32,7 @@ def _check_size(size: object) -> tuple[int, int] | None:
     if not isinstance(size, Sequence) or isinstance(size, str) or len(size) != 2:
         raise TypeError(f"size must be None or a pair (H, W) of ints, got {size!r}")
     hw = check_int(size[0], "size[0] (H)", minimum=1), check_int(size[1], "size[1] (W)", minimum=1)
-    check_limit(max(hw), "size", "pixels per image side", *SIDE_LIMIT)  # a view is H x W floats in memory
+    check_limit(max(hw), "size", "pixels per image side", SIDE_LIMIT)  # a view is H x W floats in memory
     return hw
 
 
@@ -77,8 +77,7 @@ class ViewDataset(Dataset[dict[str, Any]]):
         manifest: The views.
         size: ``(H, W)`` every image and mask is resized to, or None to keep each file's
             size (then a ``DataLoader`` batch needs files of one size); each side at most
-            :data:`~torch_eigview.check.SIDE_LIMIT` (512; the environment variable
-            ``EIGVIEW_MAX_IMAGE_SIDE`` raises it).
+            the ``max_image_side`` limit (512 by default, :mod:`torch_eigview.config`).
         channels: ``1`` (RGB to gray with the BT.709 weights), ``3`` (gray repeated) or
             None to keep each file's channels.
         dtype: Floating dtype of the images.

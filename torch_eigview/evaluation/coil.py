@@ -5,7 +5,9 @@ views); the views over the gallery range are synthesized (``nvs``), or the basel
 eigenspace uses the seed views alone (``sparse``) or the real views every 5° over the
 gallery range (``dense``). One eigenspace is fitted over all objects' gallery views, and
 every real view every 5° over ``test`` (around ``center``) is recognized by its nearest
-neighbour.
+neighbour. The gallery, the eigenspace and the recognizer are those of
+:class:`~torch_eigview.method.FewViewEigenspace` (:meth:`CoilExperiment.estimator`), the
+pipeline every command builds through; the experiment adds the folder's views and the score.
 
 The gallery range is ``synth`` for two seed views. With more, it follows the seeds'
 span (:meth:`CoilExperiment.synth_angles`): each further seed extends it by α on its
@@ -30,7 +32,6 @@ import math
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import torch
 
@@ -47,12 +48,12 @@ from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.evaluation.circle import CircleLayout, circle_layout, grid_step
 from torch_eigview.evaluation.coil_result import CoilResult
-from torch_eigview.evaluation.scoring import angle_range, build_recognizer, score, stack_gallery, wrap_degrees
+from torch_eigview.evaluation.scoring import score
 from torch_eigview.evaluation.seed_pose import SeedPoses
-from torch_eigview.geometry.angles import wrap_angle
-from torch_eigview.scale.galleries import object_galleries
-from torch_eigview.scale.parallel import KINDS, group_size
-from torch_eigview.synthesis import SynthesisOptions, SynthesizedViews, check_overlap
+from torch_eigview.geometry.angles import angle_range, wrap_angle, wrap_degrees
+from torch_eigview.method.estimator import FewViewEigenspace
+from torch_eigview.scale.parallel import KINDS
+from torch_eigview.synthesis import Circle, SynthesisOptions, check_overlap
 
 __all__ = ["CoilExperiment", "CoilResult", "angle_range", "wrap_degrees"]
 
@@ -103,7 +104,8 @@ class CoilExperiment:
             not the nearest view's pose.
         three_view_pose: then measure each pose by geometry from the pose above, against
             the recognized object's seeds (:class:`~torch_eigview.evaluation.seed_pose.SeedPoses`,
-            about 0.13 s a view over two worker threads); not with ``seeds=2`` (Eq. 2 is singular).
+            two flows per view, about what synthesizing a view costs); not with ``seeds=2``
+            (Eq. 2 is singular).
         overlap: with ``seeds``, degrees each seed pair extrapolates past its seeds
             (:func:`~torch_eigview.evaluation.circle.synthesize_circle`), 0 for none.
         workers: workers that synthesize the ``nvs`` galleries, a few objects each at a
@@ -168,8 +170,8 @@ class CoilExperiment:
         if self.synth[2] > 0:  # else angle_range names the bad step
             # "dense" takes the real views every 5 degrees over the same range.
             step = min(self.synth[2], 5.0)
-            check_limit((stop - start) / step + 1, "synth", "views per object", *VIEW_LIMIT)
-        check_limit((self.test[1] - self.test[0]) / 5.0 + 1, "test", "test views per object", *VIEW_LIMIT)
+            check_limit((stop - start) / step + 1, "synth", "views per object", VIEW_LIMIT)
+        check_limit((self.test[1] - self.test[0]) / 5.0 + 1, "test", "test views per object", VIEW_LIMIT)
         angle_range(*self.synth, name="synth")
         angle_range(self.test[0], self.test[1], 5.0, name="test")
         if not isinstance(self.interpolate_pose, bool) or not isinstance(self.three_view_pose, bool):
@@ -220,9 +222,6 @@ class CoilExperiment:
             layout.seeds if layout is not None else [self._center + n * self.alpha for n in range(self.views)]
         )
 
-    def _seeds(self, folder: CoilFolder, obj: int) -> torch.Tensor:
-        return folder.images(obj, self.seed_poses())
-
     def circle(
         self,
         folder: CoilFolder,
@@ -241,62 +240,57 @@ class CoilExperiment:
         common = set.intersection(*(set(folder.poses(obj)) for obj in objs))
         layout = circle_layout(sorted(common), self._center, self.seeds, self.method, self.dense_step, names)
         if self.overlap != 0:
-            check_overlap(self.seeds, self.overlap, "--overlap" if names[0] == "--seeds" else "overlap")
+            check_overlap(self.seeds, self.overlap, "overlap")
         return layout
 
-    def _real_gallery(
-        self, folder: CoilFolder, obj: int, layout: CircleLayout | None
-    ) -> tuple[torch.Tensor, int, list[float]]:
-        """``(views, obj, poses)`` of a gallery of real views (``sparse``, ``dense``)."""
+    def _gallery_inputs(
+        self, folder: CoilFolder, objects: list[int], layout: CircleLayout | None
+    ) -> tuple[list[torch.Tensor], list[list[float]]]:
+        """Per object the views the estimator is fitted on and their poses (degrees): the
+        seed views (``nvs``, ``sparse``) or the real views every pose step over the
+        gallery range (``dense``; the full circle's every dense step)."""
         if layout is not None:
-            return folder.images(obj, layout.real), obj, layout.real
-        angles = self.seed_poses()
-        if self.method == "dense":  # every real view in the synthesized range
-            angles = [self._center + a for a in self.synth_angles(grid_step(folder.poses(obj)))]
-        return folder.images(obj, angles), obj, angles
-
-    def _synthesis_job(
-        self, folder: CoilFolder, obj: int, layout: CircleLayout | None, copy: bool
-    ) -> tuple[Any, ...]:
-        """The arguments of :func:`synthesize_object` for one object's ``nvs`` gallery (the
-        seeds a ``copy`` of the folder's: a worker's share moves the whole storage)."""
-        seeds = folder.images(obj, layout.seeds) if layout is not None else self._seeds(folder, obj)
-        seeds = seeds.clone() if copy else seeds
-        angles = None if layout is not None else self.synth_angles()
-        return seeds, self.alpha, angles, self.synth[2], self.synthesis, self.overlap
+            read = layout.seeds if self.method != "dense" else layout.real
+            # The seeds' poses from the wrapped center, as the gallery's (the files' are mod 360).
+            poses = (
+                read
+                if self.method == "dense"
+                else [self._center + k * layout.alpha for k in range(len(read))]
+            )
+            return [folder.images(obj, read) for obj in objects], [list(poses) for _ in objects]
+        views, angles = [], []
+        for obj in objects:
+            poses = self.seed_poses()
+            if self.method == "dense":  # every real view in the synthesized range
+                poses = [self._center + a for a in self.synth_angles(grid_step(folder.poses(obj)))]
+            views.append(folder.images(obj, poses))
+            angles.append(poses)
+        return views, angles
 
     def _cpu_workers(self, folder: CoilFolder) -> int:
         """``workers`` for a run over ``folder``: the workers run on the CPU, none elsewhere."""
         return self.workers if folder.device.type == "cpu" else 0
 
-    def _synthesized(
-        self, folder: CoilFolder, objects: list[int], ticks: Iterable[int], layout: CircleLayout | None
-    ) -> Iterator[tuple[int, SynthesizedViews]]:
-        """``(obj, views)`` of each object's ``nvs`` gallery, in order, over ``workers``."""
-        workers = self._cpu_workers(folder)
-        copy = workers > 0 and self.worker_kind == "process"
-        jobs = (self._synthesis_job(folder, obj, layout, copy=copy) for obj in objects)
-        return object_galleries(jobs, ticks, workers, self.worker_kind, group_size(len(objects), workers))
-
-    def _galleries(
-        self,
-        folder: CoilFolder,
-        objects: list[int],
-        ticks: Iterable[int],
-        seconds: dict[str, float],
-        elevations: dict[int, list[float]],
-        layout: CircleLayout | None,
-    ) -> Iterator[tuple[torch.Tensor, int, list[float]]]:
-        """Each object's gallery in turn (``ticks``: ``objects``, or a progress bar over
-        them); the ``nvs`` ones over ``workers`` threads or processes, in order."""
-        if self.method != "nvs":
-            yield from (self._real_gallery(folder, obj, layout) for obj in ticks)
-            return
-        for obj, out in self._synthesized(folder, objects, ticks, layout):
-            for key, value in out.seconds.items():
-                seconds[key] += value
-            elevations[obj] = out.elevations
-            yield out.views, obj, [self._center + t for t in out.thetas.tolist()]
+    def estimator(
+        self, folder: CoilFolder | None = None, layout: CircleLayout | None = None
+    ) -> FewViewEigenspace:
+        """The :class:`~torch_eigview.method.FewViewEigenspace` that builds this experiment's
+        gallery, eigenspace and recognizer (``nvs``: synthesized from the seeds, ``sparse``
+        and ``dense``: the real views alone); workers only for a folder on the CPU."""
+        synth: tuple[float, float, float] | Circle | None = None
+        if self.method == "nvs":
+            synth = self.synth if layout is None else Circle(self.synth[2], self.overlap)
+        return FewViewEigenspace(
+            self.components,
+            synth=synth,
+            options=self.synthesis,
+            unit_norm=self.unit_norm,
+            kernel=self.kernel,
+            gamma=self.gamma,
+            synth_follows_seeds=self.synth_follows_seeds,
+            workers=self.workers if folder is None else self._cpu_workers(folder),
+            worker_kind=self.worker_kind,
+        )
 
     def run(
         self,
@@ -321,32 +315,23 @@ class CoilExperiment:
             SeedPoses(folder, seeds, layout is not None, self.synthesis) if self.three_view_pose else None
         )
         t_start = time.perf_counter()
-        seconds = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0, "recognition": 0.0}
-        elevations: dict[int, list[float]] = {}
-        ticks = progress(objects) if progress else objects
-        x, labels, poses = stack_gallery(self._galleries(folder, objects, ticks, seconds, elevations, layout))
-        t0 = time.perf_counter()
-        recognizer = build_recognizer(
-            x,
-            labels,
-            wrap_degrees(poses),
-            self.components,
-            unit_norm=self.unit_norm,
-            kernel=self.kernel,
-            gamma=self.gamma,
-        )
-        seconds["eigen"] = time.perf_counter() - t0
-
+        views, angles = self._gallery_inputs(folder, objects, layout)
+        est = self.estimator(folder, layout).fit(views, angles, labels=objects, progress=progress)
+        seconds = {
+            "correspondence": est.seconds_.get("correspondence", 0.0),
+            "synthesis": est.seconds_.get("synthesis", 0.0),
+            "eigen": est.seconds_["eigen"],
+        }
         t0 = time.perf_counter()
         if layout is None:
             step = grid_step([p for obj in objects for p in folder.poses(obj)])
             test_poses = [self._center + a for a in angle_range(self.test[0], self.test[1], step, "test")]
         else:
             test_poses = layout.tests
-        tests = self._tests(folder, objects, test_poses, x.dtype)
+        tests = self._tests(folder, objects, test_poses, views[0].dtype)
         threads = self._cpu_workers(folder) if self.worker_kind == "thread" else 0
         result = score(
-            recognizer,
+            est.recognizer_,
             tests,
             wrap=True,
             interpolate_pose=self.interpolate_pose,
@@ -361,10 +346,10 @@ class CoilExperiment:
             per_object=result.per_object,
             pose_mae_deg=result.pose_mae_deg,
             n_test=result.n_test,
-            n_train_views=x.shape[0],
+            n_train_views=int(est.gallery_labels_.shape[0]),
             seconds=seconds,
-            recognizer=recognizer,
-            elevations=elevations,
+            recognizer=est.recognizer_,
+            elevations=dict(zip(objects, est.elevations_, strict=False)),
             pose_median_deg=result.pose_median_deg,
         )
 

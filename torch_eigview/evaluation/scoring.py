@@ -1,140 +1,30 @@
-"""The recognition protocol of the paper's experiments (Sec. 5.1, Fig. 2; Sec. 5.2, Fig. 4(b)).
+"""Recognition scored on test views (the paper's Sec. 5.1, Fig. 2 and Sec. 5.2, Fig. 4(b)).
 
-Every experiment runs the same three steps, whatever made its gallery:
-
-1. :func:`stack_gallery`: the gallery views of all objects in one batch, with their labels
-   and poses;
-2. :func:`build_recognizer`: one eigenspace over all of them (each view scaled to unit L2
-   norm: Murase and Nayar's brightness normalization), the projection layer that applies
-   it, and the nearest-neighbour recognizer over the gallery's coefficients;
-3. :func:`score`: each object's test views recognized; the accuracy over all of them and
-   per object, and the mean absolute pose error of the correctly recognized ones.
-
-The COIL experiment (:mod:`torch_eigview.evaluation.coil`) and the synthetic one
-(:mod:`torch_eigview.apps.demo`) differ only in their galleries and test views.
+A recognizer (fitted by :class:`~torch_eigview.method.FewViewEigenspace`) recognizes
+each object's test views; :func:`score` reports the accuracy over all of them and per
+object, and the absolute pose error (mean and median) of the correctly recognized ones.
+The COIL experiment (:mod:`torch_eigview.evaluation.coil`), ``eigview demo`` and
+``eigview evaluate`` all score this way.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Callable, Hashable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Hashable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 import torch
 
 from torch_eigview.check import check_int
-from torch_eigview.decomposition.eigenspace import Eigenspace
-from torch_eigview.decomposition.kernel import KernelEigenspace
-from torch_eigview.geometry.angles import angle_range, wrap_degrees
-from torch_eigview.nn.functional import unit_rows
-from torch_eigview.nn.kernel_projection import KernelProjection
-from torch_eigview.nn.projection import EigenProjection
+from torch_eigview.geometry.angles import wrap_degrees
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.scale.parallel import map_ordered
-from torch_eigview.scale.thread_policy import eigen_flops, for_products
 
-__all__ = [
-    "Score",
-    "angle_range",
-    "build_recognizer",
-    "fit_projection",
-    "score",
-    "stack_gallery",
-    "wrap_degrees",
-]
+__all__ = ["Score", "score"]
 
 K = TypeVar("K", bound=Hashable)
-
-
-def stack_gallery(
-    blocks: Iterable[tuple[torch.Tensor, int, Sequence[float]]],
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """All objects' gallery views in one batch.
-
-    Args:
-        blocks: per object ``(views, label, poses)``: (T_i, C, H, W) views, the object's
-            integer label and its T_i poses in degrees.
-
-    Returns:
-        ``(views, labels, poses)``: (P, C, H, W) views, (P,) int64 labels and (P,) poses
-        of the views' dtype, P = Σ T_i, in the order of ``blocks``.
-    """
-    views: list[torch.Tensor] = []
-    labels: list[int] = []
-    poses: list[float] = []
-    for block, label, angles in blocks:
-        views.append(block)
-        labels += [label] * len(angles)
-        poses += angles
-    x = torch.cat(views)
-    return x, torch.tensor(labels), torch.tensor(poses, dtype=x.dtype)
-
-
-def fit_projection(
-    views: torch.Tensor,
-    components: int | float,
-    *,
-    unit_norm: bool = True,
-    kernel: str | None = None,
-    gamma: float | str | None = None,
-) -> EigenProjection | KernelProjection:
-    """The eigenspace of the gallery views as a frozen projection layer.
-
-    Args:
-        views: (P, C, H, W) gallery views.
-        components: eigenspace dimension k (int) or energy fraction (float in (0, 1)).
-        unit_norm: scale every view to unit L2 norm, before the fit and in the layer.
-        kernel: None for the linear eigenspace (the paper's), or a
-            :class:`~torch_eigview.decomposition.kernel.KernelEigenspace` kernel.
-        gamma: the kernel's γ (see :class:`~torch_eigview.decomposition.kernel.KernelEigenspace`).
-
-    Returns:
-        An :class:`~torch_eigview.nn.projection.EigenProjection` (linear) or a
-        :class:`~torch_eigview.nn.kernel_projection.KernelProjection` taking (B, C, H, W) views.
-    """
-    c, h, w = views.shape[1:]
-    x_fit = unit_rows(views) if unit_norm else views.flatten(1)
-    if kernel is None:
-        with for_products(eigen_flops(*x_fit.shape)):
-            space = Eigenspace(components).fit(x_fit)
-        return EigenProjection(
-            space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=unit_norm
-        )
-    kspace = KernelEigenspace(components, kernel=kernel, gamma=gamma)
-    return kspace.fit(x_fit.reshape(-1, c, h, w)).to_module(unit_norm=unit_norm)
-
-
-def build_recognizer(
-    views: torch.Tensor,
-    labels: torch.Tensor,
-    poses: torch.Tensor,
-    components: int | float,
-    *,
-    unit_norm: bool = True,
-    kernel: str | None = None,
-    gamma: float | str | None = None,
-    label_names: list[str] | None = None,
-) -> NearestNeighborRecognizer:
-    """The nearest-neighbour recognizer over the eigenspace of the gallery (:func:`fit_projection`).
-
-    Args:
-        views: (P, C, H, W) gallery views.
-        labels: (P,) their labels.
-        poses: (P,) their poses in degrees.
-        components, unit_norm, kernel, gamma: as :func:`fit_projection`'s.
-        label_names: names of the labels 0, 1, …, or None.
-
-    Example:
-        >>> views = torch.rand(6, 1, 8, 8)
-        >>> labels = torch.tensor([0, 0, 0, 1, 1, 1])
-        >>> rec = build_recognizer(views, labels, torch.zeros(6), 3)
-        >>> rec.predict(views).labels.tolist()
-        [0, 0, 0, 1, 1, 1]
-    """
-    projection = fit_projection(views, components, unit_norm=unit_norm, kernel=kernel, gamma=gamma)
-    return NearestNeighborRecognizer.from_views(projection, views, labels, poses, label_names)
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ def angle_range(start: float, stop: float, step: float, name: str) -> list[float
         raise ValueError(f"{name} must be finite numbers, got start={start}, stop={stop}, step={step}")
     if stop < start:
         raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
-    check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
+    check_limit((stop - start) / step + 1, name, "views per object", VIEW_LIMIT)
     n = int((stop - start) / step + 1e-9) + 1
     return [start + i * step for i in range(n)]
 

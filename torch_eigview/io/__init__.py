@@ -13,6 +13,7 @@ from torch_eigview.lazy import attach
 if TYPE_CHECKING:
     from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
     from torch_eigview.io.images import read_image
+    from torch_eigview.io.model import Model, load_model
     from torch_eigview.io.onnx import (
         compare_with_eager,
         export_onnx,
@@ -27,6 +28,8 @@ _SOURCES = {
     "load_recognizer": "checkpoint",
     "save_recognizer": "checkpoint",
     "read_image": "images",
+    "Model": "model",
+    "load_model": "model",
     "compare_with_eager": "onnx",
     "export_onnx": "onnx",
     "export_projection": "onnx",
@@ -37,12 +40,14 @@ _SOURCES = {
 }
 
 __all__ = [
+    "Model",
     "OnnxModelInfo",
     "Preprocessing",
     "compare_with_eager",
     "export_onnx",
     "export_projection",
     "export_recognizer",
+    "load_model",
     "load_recognizer",
     "read_image",
     "read_metadata",

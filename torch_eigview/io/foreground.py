@@ -173,6 +173,8 @@ def estimate_foreground(
     c, h, w = image.shape
     if image.size and not np.isfinite(image).all():
         raise ValueError(f"image must hold finite values, got NaN or infinite ones in {where}")
+    if min(h, w) == 0:
+        raise ValueError(f"image has no pixels to tell its foreground from: (H, W)=({h}, {w})")
     if 2 * border >= min(h, w):
         raise ValueError(f"border={border} must be less than half the image side min(H, W)={min(h, w)}")
     if background is not None and len(background) != c:

@@ -12,9 +12,11 @@ RGBA, 16-bit gray, bilevel; palette images expanded to their palette's colours, 
 imageio does). Two differ from scikit-image's, on purpose: a palette image with a
 transparent entry keeps it as alpha (RGBA, so that a cut-out saved as an 8-bit PNG keeps
 its mask; scikit-image gives its RGB alone), and a CMYK image (a print JPEG) is converted
-to RGB (scikit-image hands over its four raw channels, whose K was taken for alpha). TIFF and every other file go to ``skimage.io.imread``, imported only
-then: it costs about half a second to import and 0.3 ms more per COIL image. The arrays
-are the caller's own (writable), as scikit-image's are.
+to RGB (scikit-image hands over its four raw channels, whose K was taken for alpha). TIFF
+and every other file go to ``skimage.io.imread``, imported only then: its import is heavy
+(scikit-image and imageio's plugins), and for the common formats it only adds layers over
+the Pillow decoder that reads them. The arrays are the caller's own (writable), as
+scikit-image's are.
 """
 
 from __future__ import annotations
@@ -124,11 +126,23 @@ def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False, what: 
         ValueError: a special file, a file that cannot be decoded, several pages, a layout
             or dtype that is not an image's, or float pixels outside ``[0, 1]``.
     """
-    check_regular_file(path, what)
+    info = check_regular_file(path, what)
+    if info.st_size == 0:
+        raise ValueError(f"{what} {os.fspath(path)} is empty (0 bytes): not an image file")
     try:
         arr, frames = _decode(path)
     except Exception as exc:  # imageio/PIL raise OSError, SyntaxError, ... for bad files
-        raise ValueError(f"cannot read image {path}: {exc}") from exc
+        # The cause a user can act on is that the bytes are no image these readers know; the
+        # decoder's first line says where it stopped, and imageio's advice to install video
+        # plugins for an unknown file is left out (it would only mislead).
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if "Could not find a backend" in detail:
+            detail = "no reader recognizes its contents"
+        raise ValueError(
+            f"{what} {os.fspath(path)} is not an image file that can be read (damaged, truncated, or "
+            f"another kind of file; PNG, JPEG, TIFF, BMP and the other raster formats Pillow reads are "
+            f"supported): {detail}"
+        ) from exc
     if frames > 1 or arr is None:
         raise ValueError(f"image {path} holds {frames} pages or frames; one image per file is expected")
     if arr.ndim == 2:

@@ -7,7 +7,8 @@
 it uses only the operators our exports use (nothing that builds a tensor of a size read
 from data: no ``Expand``, ``Tile``, ``ConstantOfShape``, ``Range``, ``Resize``, loops), its
 weights are finite and its weights and per-image intermediate tensors (from ONNX shape
-inference) fit in a byte budget, ``EIGVIEW_MAX_MODEL_BYTES`` (default 2 GiB).
+inference) fit in a byte budget, the ``max_model_bytes`` limit (2 GiB by default,
+:mod:`torch_eigview.config`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from torch_eigview.config import get_config
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 
 __all__ = ["ALLOWED_OPS", "MODEL_BYTES", "check_recognizer_graph", "model_byte_limit"]
@@ -35,19 +37,14 @@ ALLOWED_OPS = frozenset(
 )  # fmt: skip
 INPUT_NAME = "images"
 OUTPUTS = ("label_index", "pose", "distance")
-MODEL_BYTES = ("EIGVIEW_MAX_MODEL_BYTES", 2 << 30)
+MODEL_BYTES = "max_model_bytes"  # the limit's name in torch_eigview.config
 _BATCH = 64  # images per onnxruntime call in eigview predict: intermediates are held for as many
 
 
 def model_byte_limit() -> int:
-    """The byte budget: ``EIGVIEW_MAX_MODEL_BYTES`` (a positive int) or 2 GiB."""
-    env, default = MODEL_BYTES
-    text = os.environ.get(env, "").strip()
-    if not text:
-        return default
-    if not text.isdigit() or int(text) < 1:
-        raise ValueError(f"environment variable {env}={text!r} must be a positive integer (bytes)")
-    return int(text)
+    """The byte budget: the ``max_model_bytes`` limit of :mod:`torch_eigview.config` (2 GiB
+    by default; the ``eigview`` command reads ``EIGVIEW_MAX_MODEL_BYTES`` into it)."""
+    return get_config()[MODEL_BYTES]
 
 
 def _dims(value: Any) -> list[int | str]:
@@ -84,7 +81,7 @@ def _check_weights(graph: Any, source: str, budget: int) -> None:
         if total > budget:
             raise ValueError(
                 f"{source}'s weights exceed {budget} bytes at initializer {t.name!r} (dims {list(t.dims)}); "
-                f"set the environment variable {MODEL_BYTES[0]} to raise the limit"
+                f"raise the limit with torch_eigview.config_context(max_model_bytes=...) or EIGVIEW_MAX_MODEL_BYTES"
             )
     for t in graph.initializer:
         if t.data_location == 1:  # EXTERNAL: onnxruntime loads and checks the folder itself
@@ -114,7 +111,7 @@ def _check_intermediates(model: Any, source: str, budget: int) -> None:
         if count > per_image:
             raise ValueError(
                 f"{source}: tensor {value.name!r} of shape {dims} holds {count} values per image, more than "
-                f"{per_image} ({budget} bytes for a batch of {_BATCH}); set {MODEL_BYTES[0]} to raise the limit"
+                f"{per_image} ({budget} bytes for a batch of {_BATCH}); raise the limit with torch_eigview.config_context(max_model_bytes=...) or EIGVIEW_MAX_MODEL_BYTES"
             )
 
 
@@ -136,7 +133,7 @@ def check_recognizer_graph(path: str | os.PathLike[str], info: OnnxModelInfo) ->
     size = os.stat(path).st_size
     if size > budget:
         raise ValueError(
-            f"{source} is {size} bytes, more than {budget}; set {MODEL_BYTES[0]} to raise the limit"
+            f"{source} is {size} bytes, more than {budget}; raise the limit with torch_eigview.config_context(max_model_bytes=...) or EIGVIEW_MAX_MODEL_BYTES"
         )
     try:
         model = onnx.load(os.fspath(path), load_external_data=False)

@@ -147,7 +147,11 @@ class Preprocessing:
                 None if colour is None else tuple(colour),
                 record.get("tolerance"),
             )
-        except (KeyError, ValueError) as exc:
+        except KeyError as exc:
+            raise ValueError(
+                f"{source} has a damaged preprocessing record: {exc} is missing (a field every record holds)"
+            ) from None
+        except ValueError as exc:
             raise ValueError(f"{source} has a damaged preprocessing record: {exc}") from None
 
     def to_prop(self) -> str:

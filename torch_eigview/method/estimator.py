@@ -1,14 +1,16 @@
 """The whole method as one estimator: seed views per object in, eigenspace and gallery out.
 
-:class:`FewViewEigenspace` runs the recognition pipeline of the paper's experiments
-(Sec. 4; :mod:`torch_eigview.evaluation.coil`) as a library object: per object, the
-correspondences of its seed views and the views synthesized over a range of angles
+:class:`FewViewEigenspace` is the recognition pipeline, the one every command and
+experiment of the package builds through (``eigview fit``, ``coil`` and ``demo``,
+:class:`~torch_eigview.evaluation.CoilExperiment`): per object, the correspondences of
+its seed views and the views synthesized over a range of angles
 (:func:`~torch_eigview.synthesis.synthesize_views`, Sec. 4.1 sectors for more than two
-seeds); one eigenspace over every object's gallery views, each scaled to unit L2 norm
-(Murase and Nayar's brightness normalization); the frozen projection layer; and the
-nearest-neighbour recognizer over the gallery's coordinates (Sec. 4.2). With
-``reject_rate``, ``fit`` also synthesizes views at poses held out from the gallery and
-calibrates the recognizer's rejection of unknown objects on them
+seeds, or :func:`~torch_eigview.synthesis.synthesize_circle` all round the turntable),
+over worker threads or processes when asked; one eigenspace over every object's gallery
+views, each scaled to unit L2 norm (Murase and Nayar's brightness normalization); the
+frozen projection layer; and the nearest-neighbour recognizer over the gallery's
+coordinates (Sec. 4.2). With ``reject_rate``, ``fit`` also synthesizes views at poses held
+out from the gallery and calibrates the recognizer's rejection of unknown objects on them
 (:mod:`torch_eigview.method.rejection`).
 
 It follows scikit-learn's conventions: hyperparameters are stored as given by
@@ -17,7 +19,9 @@ It follows scikit-learn's conventions: hyperparameters are stored as given by
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Hashable, Iterable, Iterator
+from typing import Any
 
 import torch
 
@@ -32,6 +36,7 @@ from torch_eigview.method.inputs import (
     block_item,
     block_source,
     check_angles,
+    check_circle_angles,
     check_labels,
     check_seed_masks,
     check_seeds,
@@ -46,7 +51,10 @@ from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
-from torch_eigview.synthesis import SynthesisOptions, synthesize_views
+from torch_eigview.scale.galleries import ObjectJob, object_galleries
+from torch_eigview.scale.parallel import KINDS, group_size
+from torch_eigview.scale.thread_policy import eigen_flops, for_products
+from torch_eigview.synthesis import Circle, SynthesisOptions, SynthesizedViews
 
 __all__ = ["FewViewEigenspace"]
 
@@ -61,11 +69,14 @@ class FewViewEigenspace:
             None for every component above rounding (:data:`ALL_COMPONENTS`).
         synth: the synthesized angles: ``"around-seeds"`` (default,
             :data:`~torch_eigview.geometry.angles.AROUND_SEEDS`), every degree from 20°
-            before each object's first seed view to 20° past its last; or (start, stop,
+            before each object's first seed view to 20° past its last; (start, stop,
             step) in degrees relative to the first seed view, for two seeds (see
-            ``synth_follows_seeds``; ``(-20, 20, 1)`` is the paper's protocol); None
-            fits the seed views alone (the ``sparse`` baseline of the experiments). At
-            most 3600 views per object (environment variable ``EIGVIEW_MAX_VIEWS``).
+            ``synth_follows_seeds``; ``(-20, 20, 1)`` is the paper's protocol);
+            ``"circle"`` or a :class:`~torch_eigview.synthesis.Circle` (its step and
+            overlap): M >= 3 seed views evenly spaced round the turntable, every sector
+            synthesized (:func:`~torch_eigview.synthesis.synthesize_circle`); or None,
+            which fits the seed views alone (the ``sparse`` baseline of the experiments,
+            or any gallery of real views). At most 3600 views per object.
         options: :class:`~torch_eigview.synthesis.SynthesisOptions` (flow, elevation,
             extent, blend, silhouette, …); None for the defaults.
         unit_norm: scale every view to unit L2 norm before the eigenspace and in the layer.
@@ -86,6 +97,27 @@ class FewViewEigenspace:
             (default), every 2.5° from 45° before each object's first seed view to 45°
             past its last (25° past the default gallery on both sides), or (start, stop,
             step) in degrees relative to the first seed view; gallery poses are left out.
+            Round the circle the held-out views are the midpoints between consecutive
+            gallery views (only ``"around-seeds"`` is taken).
+        workers: threads or processes that synthesize the objects' galleries, a few
+            objects each at a time with their flows in shared calls (the same views as
+            one at a time); 0 (the default) synthesizes in the calling thread. Threads run
+            torch under the caller's intra-op thread setting: run them under
+            :func:`~torch_eigview.scale.thread_policy.threads` ``(1)``, as the commands do.
+        worker_kind: ``"thread"`` (the default: torch's kernels release the GIL) or
+            ``"process"`` (spawned processes, one torch thread each: for flows that hold
+            the GIL, ``"ilk"`` and ``"tvl1-skimage"``).
+
+    Attributes:
+        eigenspace_, projection_, recognizer_: the fitted eigenspace, its frozen layer and
+            the nearest-neighbour recognizer over the gallery.
+        gallery_labels_, gallery_poses_: (P,) labels and poses (degrees in (−180, 180]).
+        label_names_: the objects' names when ``fit`` was given names as labels, else None.
+        image_shape_: (C, H, W) of the views.
+        elevations_: per object, its seed pairs' camera elevations (degrees).
+        seconds_: time spent in ``"correspondence"``, ``"synthesis"`` and ``"eigen"``.
+        n_calibration_views_: the held-out views the rejection was calibrated on (0
+            without ``reject_rate``).
 
     Example:
         >>> seeds = torch.rand(2, 2, 1, 16, 16)  # 2 objects, seed views at 0 and 10 degrees
@@ -98,7 +130,7 @@ class FewViewEigenspace:
         self,
         n_components: int | float | None = 15,
         *,
-        synth: tuple[float, float, float] | str | None = AROUND_SEEDS,
+        synth: tuple[float, float, float] | str | Circle | None = AROUND_SEEDS,
         options: SynthesisOptions | None = None,
         unit_norm: bool = True,
         kernel: str | None = None,
@@ -108,6 +140,8 @@ class FewViewEigenspace:
         reject_rate: float | None = None,
         reject_score: str = "difs",
         reject_poses: tuple[float, float, float] | str = AROUND_SEEDS,
+        workers: int = 0,
+        worker_kind: str = "thread",
     ) -> None:
         self.n_components = n_components
         self.synth = synth
@@ -120,6 +154,8 @@ class FewViewEigenspace:
         self.reject_rate = reject_rate
         self.reject_score = reject_score
         self.reject_poses = reject_poses
+        self.workers = workers
+        self.worker_kind = worker_kind
 
     def __repr__(self) -> str:
         return f"FewViewEigenspace(n_components={self.n_components!r}, synth={self.synth!r}, kernel={self.kernel!r})"
@@ -144,6 +180,8 @@ class FewViewEigenspace:
             self.gamma,
             self.synth_follows_seeds,
             check_int(self.max_views, "max_views", 1),
+            check_int(self.workers, "workers", minimum=0),
+            check_choice(self.worker_kind, "worker_kind", KINDS),
         )
 
     def _reject_params(self, synth: object) -> tuple[float, str, tuple[float, float, float] | str] | None:
@@ -152,20 +190,31 @@ class FewViewEigenspace:
         rate = check_reject_rate(self.reject_rate)
         score = check_choice(self.reject_score, "reject_score", REJECT_SCORES)
         poses = check_synth(self.reject_poses, "reject_poses", around=True)
-        if poses is None:
+        if poses is None or isinstance(poses, Circle):
             raise ValueError(
-                f"reject_poses must be (start, stop, step) in degrees or {AROUND_SEEDS!r}, got None"
+                f"reject_poses must be (start, stop, step) in degrees or {AROUND_SEEDS!r}, got {self.reject_poses!r}"
             )
         if synth is None:
             raise ValueError(
                 f"reject_rate={rate} calibrates on synthesized views: it needs synth, got synth=None "
                 "(or calibrate on held-out views with calibrate_rejection)"
             )
+        if isinstance(synth, Circle) and poses != AROUND_SEEDS:
+            raise ValueError(
+                f"reject_poses={poses!r} cannot be placed round the full circle: its held-out views are the "
+                f"midpoints between gallery views; leave reject_poses at {AROUND_SEEDS!r}"
+            )
         return rate, score, poses
 
     # ------------------------------------------------------------------ fitting
     def fit(
-        self, seeds: object, seed_angles: object, labels: object = None, *, masks: object = None
+        self,
+        seeds: object,
+        seed_angles: object,
+        labels: object = None,
+        *,
+        masks: object = None,
+        progress: Callable[[Iterable[Any]], Iterable[Any]] | None = None,
     ) -> FewViewEigenspace:
         """Synthesizes every object's gallery from its seed views and fits on all of them.
 
@@ -179,19 +228,21 @@ class FewViewEigenspace:
             seed_angles: the seed views' angles in degrees (absolute: the gallery poses
                 are these plus the synthesized offsets): V numbers shared by every object,
                 or one sequence per object. With ``synth``, V_o >= 2 and the angles are
-                equally spaced (either sign) or increasing (Sec. 4.1's α_n).
-            labels: O int labels, default 0 … O − 1.
+                equally spaced (either sign) or increasing (Sec. 4.1's α_n); round the
+                circle, M >= 3 angles 360/M apart.
+            labels: O labels, default 0 … O − 1: ints, or names (strings), which become
+                ``label_names_`` (the labels are then 0 … O − 1).
             masks: optional foreground masks of the seed views, True on the object: an
                 (O, V, H, W) bool tensor or a sequence of O (V_o, H, W) ones (an entry
                 may be None). They replace the brightness threshold of synthesis
                 (silhouette-aware sampling, size normalization, the automatic elevation);
                 the seeds' background should already be one constant (e.g.
                 :class:`~torch_eigview.datasets.background.BackgroundModel`'s ``apply``).
+            progress: optional wrapper over the objects' labels (names), advanced as each
+                object's gallery is ready (e.g. ``tqdm.tqdm``).
 
         Returns:
-            self, fitted: ``eigenspace_``, ``projection_``, ``recognizer_``,
-            ``gallery_labels_`` (P,), ``gallery_poses_`` (P,) wrapped to (−180, 180],
-            ``elevations_`` (per object, one per seed pair), ``image_shape_``.
+            self, fitted (see the class's attributes).
 
         Raises:
             TypeError, ValueError: a bad hyperparameter or argument; the message names it.
@@ -199,47 +250,61 @@ class FewViewEigenspace:
         params = self._params()
         reject = self._reject_params(params.synth)
         objects = check_seeds(seeds)
-        angles = check_angles(seed_angles, objects, synthesis=params.synth is not None)
-        names = check_labels(labels, len(objects))
+        circle = isinstance(params.synth, Circle)
+        angles = check_angles(seed_angles, objects, synthesis=params.synth is not None and not circle)
+        if circle:
+            check_circle_angles(angles)
+        label_list, names = check_labels(labels, len(objects))
         seed_masks = check_seed_masks(masks, objects)
         if params.synth is not None:
             warn_unnormalized_seeds(objects, params.options)
         self.elevations_: list[list[float]] = []
+        self.seconds_: dict[str, float] = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0}
         views: list[torch.Tensor] = []
-        label_list: list[int] = []
+        gallery_labels: list[int] = []
         poses: list[float] = []
         held_out: list[torch.Tensor] = []
-        held_poses = None if reject is None else reject[2]
+        ticks = names if names is not None else label_list
         for block, label, block_poses in self._galleries(
-            params, objects, angles, names, seed_masks, held_poses, held_out
+            params,
+            objects,
+            angles,
+            label_list,
+            seed_masks,
+            None if reject is None else reject[2],
+            held_out,
+            progress(ticks) if progress else ticks,
         ):
             views.append(block)
-            label_list += [label] * len(block_poses)
+            gallery_labels += [label] * len(block_poses)
             poses += block_poses
         x = torch.cat(views)
+        t0 = time.perf_counter()
         with torch.no_grad():
-            self._fit_gallery(params, x, torch.tensor(label_list), torch.tensor(poses, dtype=x.dtype))
+            self._fit_gallery(
+                params, x, torch.tensor(gallery_labels), torch.tensor(poses, dtype=x.dtype), names
+            )
+        self.seconds_["eigen"] = time.perf_counter() - t0
+        self.n_calibration_views_ = sum(v.shape[0] for v in held_out)
         if reject is not None:
             calibrate_rejection(self.recognizer_, torch.cat(held_out), reject[0], reject[1])
         return self
 
-    def _galleries(
+    def _jobs(
         self,
         params: Params,
         objects: list[torch.Tensor],
         angles: list[list[float]],
-        labels: list[int],
         masks: list[torch.Tensor | None],
-        held_poses: tuple[float, float, float] | str | None = None,
-        held_out: list[torch.Tensor] | None = None,
-    ) -> Iterator[Gallery]:
-        """Per object its gallery views, label and poses; appends its elevations to
-        ``elevations_``, and to ``held_out`` its views synthesized at ``held_poses`` (start,
-        stop, step, or :data:`AROUND_SEEDS`) that are not gallery poses (in the same call,
-        from the same geometry)."""
-        for views, seed_angles, label, mask in zip(objects, angles, labels, masks, strict=True):
-            if params.synth is None:
-                yield views, label, seed_angles
+        held_poses: tuple[float, float, float] | str | None,
+    ) -> list[tuple[ObjectJob, int, list[float]]]:
+        """Per object its synthesis job, its number of gallery views and their angles from
+        its first seed (the job's views past those are held out; the full circle's are
+        interleaved, see :meth:`_split`); every angle checked before any view is made."""
+        plans: list[tuple[ObjectJob, int, list[float]]] = []
+        for views, seed_angles, mask in zip(objects, angles, masks, strict=True):
+            if isinstance(params.synth, Circle):
+                plans.append((ObjectJob(views, 360.0 / views.shape[0], None, mask), -1, []))
                 continue
             if views.shape[0] < 2:
                 raise ValueError(
@@ -250,14 +315,74 @@ class FewViewEigenspace:
             thetas = params.thetas(steps)
             poses_o = held_out_range(steps) if isinstance(held_poses, str) else held_poses  # AROUND_SEEDS
             held = [] if poses_o is None else off_gallery(poses_o, thetas, "reject_poses")
-            out = synthesize_views(views, alpha, thetas + held, params.options, masks=mask)
+            plans.append((ObjectJob(views, alpha, thetas + held, mask), len(thetas), thetas))
+        return plans
+
+    def _galleries(
+        self,
+        params: Params,
+        objects: list[torch.Tensor],
+        angles: list[list[float]],
+        labels: list[int],
+        masks: list[torch.Tensor | None],
+        held_poses: tuple[float, float, float] | str | None,
+        held_out: list[torch.Tensor],
+        ticks: Iterable[Hashable],
+    ) -> Iterator[Gallery]:
+        """Per object its gallery views, label and poses (degrees, unwrapped), synthesized
+        over ``params.workers``; appends its elevations to ``elevations_``, its times to
+        ``seconds_`` and to ``held_out`` its views synthesized at ``held_poses`` (start,
+        stop, step, or :data:`AROUND_SEEDS`) that are not gallery poses (in the same call,
+        from the same geometry)."""
+        if params.synth is None:
+            for views, seed_angles, label, _ in zip(objects, angles, labels, ticks, strict=True):
+                yield views, label, seed_angles
+            return
+        plans = self._jobs(params, objects, angles, masks, held_poses)
+        circle = params.synth if isinstance(params.synth, Circle) else Circle()
+        if isinstance(params.synth, Circle) and held_poses is not None:
+            circle = Circle(circle.step / 2, circle.overlap)  # the midpoints are held out
+        workers = params.workers if objects[0].device.type == "cpu" else 0
+        results = object_galleries(
+            (job for job, _, _ in plans),
+            ticks,
+            params.options,
+            circle,
+            workers=workers,
+            kind=params.worker_kind,
+            group=group_size(len(objects), workers),
+        )
+        for (_, out), (_, n, thetas), seed_angles, label in zip(results, plans, angles, labels, strict=True):
+            for key, value in out.seconds.items():
+                self.seconds_[key] = self.seconds_.get(key, 0.0) + value
             self.elevations_.append(out.elevations)
-            if held_out is not None:
-                held_out.append(out.views[len(thetas) :])
-            yield out.views[: len(thetas)], label, [seed_angles[0] + t for t in thetas]
+            gallery, gallery_thetas, held = self._split(out, n, thetas, held_poses is not None, circle.step)
+            held_out.append(held)
+            yield gallery, label, [seed_angles[0] + t for t in gallery_thetas]
+
+    @staticmethod
+    def _split(
+        out: SynthesizedViews, n: int, thetas: list[float], held: bool, step: float
+    ) -> tuple[torch.Tensor, list[float], torch.Tensor]:
+        """An object's gallery views, their angles and its held-out views: the first ``n``
+        and the rest, or round the circle (``n`` < 0, synthesized every ``step`` degrees)
+        every view, or with ``held`` the views an even number of steps from their pair's
+        seed and the midpoints between them."""
+        if n >= 0:
+            return out.views[:n], thetas, out.views[n:]
+        if not held:
+            return out.views, out.thetas.tolist(), out.views[:0]
+        alpha = 360.0 / (int(out.pairs.max()) + 1)
+        mid = ((out.thetas - out.pairs * alpha) / step).round().long() % 2 == 1
+        return out.views[~mid], out.thetas[~mid].tolist(), out.views[mid]
 
     def _fit_gallery(
-        self, params: Params, x: torch.Tensor, labels: torch.Tensor, poses: torch.Tensor
+        self,
+        params: Params,
+        x: torch.Tensor,
+        labels: torch.Tensor,
+        poses: torch.Tensor,
+        names: list[str] | None = None,
     ) -> None:
         """The eigenspace of the gallery views x (P, C, H, W), the layer and the recognizer."""
         c, h, w = x.shape[1:]
@@ -265,13 +390,15 @@ class FewViewEigenspace:
         projection: EigenProjection | KernelProjection
         space: Eigenspace | KernelEigenspace
         if params.kernel is None:
-            space = linear = Eigenspace(params.n_components).fit(x_fit)
+            # A command's policy gives a large Gram product the idle CPUs (a no-op in library use).
+            with for_products(eigen_flops(*x_fit.shape)):
+                space = linear = Eigenspace(params.n_components).fit(x_fit)
             projection = linear.to_module(unit_norm=params.unit_norm, image_shape=(c, h, w))
         else:
             kspace = KernelEigenspace(params.n_components, kernel=params.kernel, gamma=params.gamma)
             space = kspace.fit(x_fit.reshape(-1, c, h, w))
             projection = kspace.to_module(unit_norm=params.unit_norm)
-        recognizer = NearestNeighborRecognizer.from_views(projection, x, labels, wrap_degrees(poses))
+        recognizer = NearestNeighborRecognizer.from_views(projection, x, labels, wrap_degrees(poses), names)
         self._set_fitted(space, projection, recognizer, (c, h, w))
 
     def _set_fitted(
@@ -286,6 +413,7 @@ class FewViewEigenspace:
         self.recognizer_ = recognizer
         self.gallery_labels_ = recognizer.labels
         self.gallery_poses_ = recognizer.poses
+        self.label_names_ = recognizer.label_names
         self.image_shape_ = image_shape
 
     def fit_blocks(self, blocks: object) -> FewViewEigenspace:
@@ -347,6 +475,8 @@ class FewViewEigenspace:
                 projection, torch.cat(codes), torch.cat(labels), wrap_degrees(torch.cat(poses))
             )
         self.elevations_ = []
+        self.seconds_ = {}
+        self.n_calibration_views_ = 0
         self._set_fitted(space, projection, recognizer, image_shape)
         return self
 

@@ -25,8 +25,8 @@ from torch_eigview.check import (
     check_ndim,
     check_number,
 )
-from torch_eigview.geometry.angles import AROUND_SEEDS, angle_range, around_seeds, wrap_degrees
-from torch_eigview.synthesis import SynthesisOptions
+from torch_eigview.geometry.angles import AROUND_SEEDS, angle_range, around_seeds, wrap_angle, wrap_degrees
+from torch_eigview.synthesis import Circle, SynthesisOptions
 from torch_eigview.warp.normalize import FILLED_FRAME, box_fill, foreground_mask, seed_foreground
 
 __all__ = [
@@ -35,6 +35,7 @@ __all__ = [
     "block_item",
     "block_source",
     "check_angles",
+    "check_circle_angles",
     "check_labels",
     "check_seed_masks",
     "check_seeds",
@@ -63,13 +64,15 @@ class Params:
     """The hyperparameters of :class:`FewViewEigenspace`, validated."""
 
     n_components: int | float
-    synth: tuple[float, float, float] | str | None
+    synth: tuple[float, float, float] | str | Circle | None
     options: SynthesisOptions
     unit_norm: bool
     kernel: str | None
     gamma: float | str | None
     synth_follows_seeds: bool
     max_views: int
+    workers: int = 0
+    worker_kind: str = "thread"
 
     def thetas(self, steps: list[float]) -> list[float]:
         """Gallery angles relative to the first seed, for seeds ``steps`` apart: with
@@ -77,7 +80,7 @@ class Params:
         last (:func:`~torch_eigview.geometry.angles.around_seeds`); with (start, stop,
         step) that range (as ``CoilExperiment.synth_angles``: each seed past the second
         extends it on its side by its step, when ``synth_follows_seeds``)."""
-        assert self.synth is not None
+        assert self.synth is not None and not isinstance(self.synth, Circle)
         if isinstance(self.synth, str):
             return angle_range(*around_seeds(steps), "synth")
         start, stop, step = self.synth
@@ -89,13 +92,19 @@ class Params:
 
 def check_synth(
     synth: object, name: str = "synth", *, around: bool = False
-) -> tuple[float, float, float] | str | None:
+) -> tuple[float, float, float] | str | Circle | None:
     """None, (start, stop, step) finite degrees with step > 0 and start <= stop, or, with
-    ``around``, :data:`AROUND_SEEDS`; the messages name the argument ``name``."""
+    ``around``, :data:`AROUND_SEEDS` and the full circle (``"circle"``, returned as
+    ``Circle()``, or a :class:`~torch_eigview.synthesis.Circle`); the messages name the
+    argument ``name``."""
     if synth is None or (around and isinstance(synth, str) and synth == AROUND_SEEDS):
         return synth
+    if around and (isinstance(synth, Circle) or (isinstance(synth, str) and synth == "circle")):
+        circle = synth if isinstance(synth, Circle) else Circle()
+        check_limit(360.0 / circle.step, name, "views per object", VIEW_LIMIT)
+        return circle
     if not isinstance(synth, Sequence) or isinstance(synth, str) or len(synth) != 3:
-        also = f", {AROUND_SEEDS!r} or None" if around else ""
+        also = f", {AROUND_SEEDS!r}, 'circle', a Circle or None" if around else ""
         raise ValueError(f"{name} must be (start, stop, step) in degrees{also}, got {synth!r}")
     start, stop, step = (check_number(v, f"{name}[{i}]") for i, v in enumerate(synth))
     if not all(math.isfinite(v) for v in (start, stop, step)):
@@ -104,7 +113,7 @@ def check_synth(
         raise ValueError(f"{name} step must be positive, got {step}")
     if stop < start:
         raise ValueError(f"{name} must have start <= stop, got start={start}, stop={stop}")
-    check_limit((stop - start) / step + 1, name, "views per object", *VIEW_LIMIT)
+    check_limit((stop - start) / step + 1, name, "views per object", VIEW_LIMIT)
     return start, stop, step
 
 
@@ -205,14 +214,40 @@ def check_angles(
     return out
 
 
-def check_labels(labels: object, n_objects: int) -> list[int]:
+def check_labels(labels: object, n_objects: int) -> tuple[list[int], list[str] | None]:
+    """The objects' int labels and, for labels given as names, the names (the labels are
+    then 0 … O − 1); names must be distinct, as must ints."""
     if labels is None:
-        return list(range(n_objects))
+        return list(range(n_objects)), None
     if isinstance(labels, torch.Tensor):
         labels = labels.detach().tolist()
     if not isinstance(labels, Sequence) or isinstance(labels, str) or len(labels) != n_objects:
-        raise ValueError(f"labels must hold one int per object ({n_objects}), got {labels!r}")
-    return [check_int(v, f"labels[{i}]") for i, v in enumerate(labels)]
+        raise ValueError(f"labels must hold one int or name per object ({n_objects}), got {labels!r}")
+    if all(isinstance(v, str) for v in labels):
+        names = list(labels)
+        if len(set(names)) != len(names):
+            dup = sorted({v for v in names if names.count(v) > 1})
+            raise ValueError(f"labels must name each object once, got {dup} more than once")
+        return list(range(n_objects)), names
+    ints = [check_int(v, f"labels[{i}]") for i, v in enumerate(labels)]
+    return ints, None
+
+
+def check_circle_angles(angles: list[list[float]]) -> None:
+    """Each object's seed angles go once round the circle, 360/M apart, M >= 3."""
+    for i, values in enumerate(angles):
+        m = len(values)
+        if m < 3:
+            raise ValueError(
+                f"seed_angles[{i}] must hold M >= 3 angles round the circle for synth='circle' "
+                f"(seeds 180 degrees apart leave Eq. 7 singular), got {values}"
+            )
+        off = [a for k, a in enumerate(values) if abs(wrap_angle(a - values[0] - k * 360.0 / m)) > 1e-6]
+        if off:
+            raise ValueError(
+                f"seed_angles[{i}] must be {m} angles 360/{m} = {360.0 / m:g} degrees apart going round the "
+                f"circle from {values[0]:g} for synth='circle', got {values}"
+            )
 
 
 def warn_unnormalized_seeds(objects: list[torch.Tensor], options: SynthesisOptions) -> None:

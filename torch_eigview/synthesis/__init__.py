@@ -24,7 +24,7 @@ view between two seeds, by Eq. 2 over its correspondences with both.
 
 from __future__ import annotations
 
-from torch_eigview.synthesis.circle import check_overlap, synthesize_circle
+from torch_eigview.synthesis.circle import Circle, check_overlap, synthesize_circle
 from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.synthesis.seed_pairs import (
     MAX_AUTO_ELEVATION,
@@ -40,6 +40,7 @@ from torch_eigview.synthesis.views import SynthesizedViews, pair_of, synthesize_
 
 __all__ = [
     "MAX_AUTO_ELEVATION",
+    "Circle",
     "ElevationFallbackWarning",
     "PairGeometry",
     "SynthesisOptions",

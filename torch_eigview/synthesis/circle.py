@@ -13,18 +13,39 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import torch
 
-from torch_eigview.check import check_number
+from torch_eigview.check import check_number, check_positive
 from torch_eigview.geometry.angles import angle_range
 from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.synthesis.seed_pairs import PairGeometry
 from torch_eigview.synthesis.views import SynthesizedViews, synthesize_views
 
-__all__ = ["check_overlap", "synthesize_circle"]
+__all__ = ["Circle", "check_overlap", "synthesize_circle"]
 
 _TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Circle:
+    """The full circle as a gallery: what :class:`~torch_eigview.method.FewViewEigenspace`
+    synthesizes from M seed views evenly spaced round the turntable (``synth=Circle()``,
+    or ``synth="circle"`` for the defaults).
+
+    Attributes:
+        step: degrees between synthesized views, > 0 (1 by default: the paper's step).
+        overlap: degrees each seed pair also extrapolates past its seeds
+            (:func:`synthesize_circle`), 0 for none.
+    """
+
+    step: float = 1.0
+    overlap: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_positive(self.step, "Circle.step")
+        check_positive(self.overlap, "Circle.overlap", allow_zero=True)
 
 
 def check_overlap(m: int, overlap: object, name: str = "overlap") -> float:

@@ -38,8 +38,10 @@ def _degree_range(degrees: object) -> tuple[float, float]:
         lo, hi = (check_number(v, "degrees") for v in degrees)
     else:
         d = check_number(degrees, "degrees")
-        if not d >= 0:
-            raise ValueError(f"degrees={degrees} as a single number must be >= 0 (the range is (-d, d))")
+        if not (math.isfinite(d) and d >= 0):
+            raise ValueError(
+                f"degrees={degrees!r} must be a finite number >= 0 as a single number (the range is (-d, d))"
+            )
         lo, hi = -d, d
     if not (math.isfinite(lo) and math.isfinite(hi) and -90 < lo <= hi < 90):
         raise ValueError(
