@@ -148,3 +148,29 @@ def test_the_architecture_page_draws_this_table() -> None:
     block = page.split("```python\n", 1)[1].split("```", 1)[0]
     drawn = ast.literal_eval(block.split("=", 1)[1].strip())
     assert drawn == ALLOWED
+
+
+def _reads_environment(node: ast.AST) -> bool:
+    if isinstance(node, ast.Attribute):
+        return node.attr in ("environ", "environb", "getenv")
+    return isinstance(node, ast.Name) and node.id in ("environ", "getenv")
+
+
+def test_only_the_command_and_the_data_home_read_the_environment() -> None:
+    """Process policy stays out of the library: limits are parameters and configuration;
+    the command line reads EIGVIEW_MAX_*, and the data home TORCH_EIGVIEW_DATA."""
+    allowed = {("apps/cli.py", "limits_from_environment"), ("datasets/coil.py", "_data_home")}
+    found = set()
+    for path in PACKAGE.rglob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        name = path.relative_to(PACKAGE).as_posix()
+        inside: set[int] = set()
+        for func in ast.walk(tree):
+            if isinstance(func, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                for node in ast.walk(func):
+                    if id(node) not in inside and _reads_environment(node):
+                        found.add((name, func.name))
+                    inside.add(id(node))
+        if any(_reads_environment(n) and id(n) not in inside for n in ast.walk(tree)):
+            found.add((name, "<module>"))
+    assert found <= allowed, f"environment read outside the command and the data home: {found - allowed}"

@@ -63,10 +63,18 @@ def get_data_home(data_home: str | os.PathLike[str] | None = None) -> Path:
         >>> str(get_data_home("/data"))
         '/data'
     """
+    return _data_home(data_home)[0]
+
+
+def _data_home(data_home: str | os.PathLike[str] | None) -> tuple[Path, str]:
+    """:func:`get_data_home` and where it came from, in words: the one reading of the
+    environment in the library."""
     if data_home is not None:
-        return Path(data_home).expanduser()
+        return Path(data_home).expanduser(), "under the data_home given"
     env = os.environ.get(DATA_ENV, "")
-    return Path(env).expanduser() if env else Path("~/torch_eigview_data").expanduser()
+    if env:
+        return Path(env).expanduser(), f"from {DATA_ENV}={env}"
+    return Path("~/torch_eigview_data").expanduser(), f"the default data home, {DATA_ENV} being unset"
 
 
 def find_coil_root(
@@ -94,18 +102,12 @@ def find_coil_root(
         raise TypeError(f"root must be a str, a path or None, got {type(root).__name__}")
     if not isinstance(name, str):
         raise TypeError(f"name must be a str such as 'coil-20-proc', got {type(name).__name__}")
-    home = get_data_home(data_home)
+    home, source = _data_home(data_home)
     path = Path(root) if root is not None else home / name
     if path.is_dir():
         return path
     if root is not None:
         source = "given as the folder itself"
-    elif data_home is not None:
-        source = "under the data_home given"
-    elif os.environ.get(DATA_ENV):
-        source = f"from {DATA_ENV}={os.environ[DATA_ENV]}"
-    else:
-        source = f"the default data home, {DATA_ENV} being unset"
     raise ValueError(
         f"COIL images not found: {str(path)!r} ({source}) must be an existing directory of "
         f"obj{{O}}__{{P}}.png images. Put the {name}/ folder in {home}, or set {DATA_ENV} to the "
