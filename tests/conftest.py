@@ -24,6 +24,13 @@ TOL: dict[torch.dtype, dict[str, float]] = {
 
 _CUDA = torch.cuda.is_available()
 
+# Under pytest-xdist (``-n 2``: the README's test command) each worker process runs one
+# torch thread: two workers of two OpenMP threads each would oversubscribe two cores, and
+# their threads spin while they wait for each other. A test that needs more sets them
+# itself (``threads(n)``).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    torch.set_num_threads(1)
+
 
 @pytest.fixture(
     params=["cpu", pytest.param("cuda", marks=pytest.mark.skipif(not _CUDA, reason="CUDA not available"))]

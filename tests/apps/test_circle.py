@@ -71,6 +71,7 @@ def test_synthesize_circle_sectors() -> None:
     assert len(out.elevations) == 4
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 @pytest.mark.parametrize(("method", "n_gallery"), [("nvs", 360 // 15), ("sparse", 4), ("dense", 8)])
 def test_circle_run(folder: CoilFolder, method: str, n_gallery: int) -> None:

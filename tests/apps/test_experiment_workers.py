@@ -19,6 +19,7 @@ from torch_eigview.scale.thread_policy import threads
 from torch_eigview.synthesis import ElevationFallbackWarning
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["process", "thread"])
 def test_workers_give_the_same_run(folder: CoilFolder, kind: str) -> None:
     """Two spawned workers or two threads: the same gallery, eigenspace and scores as in

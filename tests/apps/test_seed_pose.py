@@ -48,6 +48,7 @@ def test_three_view_pose_from_the_command(coil_root: Path, tmp_path: Path) -> No
     assert err_geo["median"] < 1.0
 
 
+@pytest.mark.slow
 @pytest.mark.coil
 def test_three_view_pose_over_worker_threads(folder: CoilFolder, monkeypatch: pytest.MonkeyPatch) -> None:
     """The experiment's workers measure the poses as threads, one object each (not as

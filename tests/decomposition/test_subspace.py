@@ -197,6 +197,7 @@ def test_streaming_falls_back_to_the_exact_passes(monkeypatch: pytest.MonkeyPatc
     assert got.method_ == want.method_ == "exact"
 
 
+@pytest.mark.slow
 def test_auto_converges_within_its_budget_on_coil_views(
     folder: CoilFolder, monkeypatch: pytest.MonkeyPatch
 ) -> None:
