@@ -81,7 +81,7 @@ in its last bits.
   each object alone.
 
 Whether another value does better on a given machine is for the benchmarks
-(``examples/bench_*.py``, ``python -m torch_eigview.apps.bench``) to show; their figures
+(``benchmarks/bench_*.py`` in the repository) to show; their figures
 belong to that machine, not to this file.
 """
 

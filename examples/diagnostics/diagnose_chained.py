@@ -45,14 +45,11 @@ from diagnostic_record import (
 
 from torch_eigview import (
     CoilFolder,
-    EigenProjection,
-    Eigenspace,
-    NearestNeighborRecognizer,
+    FewViewEigenspace,
     SynthesisOptions,
     synthesize_views,
 )
 from torch_eigview.evaluation import CoilExperiment, Score, grid_step, score
-from torch_eigview.nn import unit_rows
 from torch_eigview.scale import threads
 from torch_eigview.synthesis import PairGeometry, pair_geometry, synthesize_circle
 
@@ -137,7 +134,7 @@ def run_with_geometry(
     objects = list(exp.objects or folder.objects)
     center = 180.0 - (180.0 - float(exp.center)) % 360.0  # the experiment's center in (-180, 180]
     layout = exp.circle(folder, objects) if exp.seeds is not None else None
-    blocks, labels, poses = [], [], []
+    blocks, angles = [], []
     for obj in objects:
         if layout is not None:
             seeds = folder.images(obj, layout.seeds)
@@ -149,17 +146,12 @@ def run_with_geometry(
             seeds = folder.images(obj, seed_poses)
             out = synthesize_views(seeds, exp.alpha, exp.synth_angles(), exp.synthesis, geometry=pairs)
         blocks.append(out.views)
-        labels += [obj] * out.views.shape[0]
-        poses += [center + t for t in out.thetas.tolist()]
-    x = torch.cat(blocks)
-    # One eigenspace of the (unit-norm) gallery views and the nearest-neighbour recognizer.
-    space = Eigenspace(exp.components).fit(unit_rows(x) if exp.unit_norm else x.flatten(1))
-    projection = EigenProjection(
-        space.mean_, space.components_, space.eigenvalues_, tuple(x.shape[1:]), unit_norm=exp.unit_norm
-    )
-    recognizer = NearestNeighborRecognizer.from_views(
-        projection, x, torch.tensor(labels), _wrap(torch.tensor(poses, dtype=x.dtype))
-    )
+        angles.append([center + t for t in out.thetas.tolist()])
+    # The library's pipeline on the galleries made here (synth=None: the views given are the
+    # gallery): one eigenspace of the unit-norm views and the nearest-neighbour recognizer.
+    est = FewViewEigenspace(exp.components, synth=None, unit_norm=exp.unit_norm)
+    recognizer = est.fit(blocks, angles, labels=objects).recognizer_
+    x = blocks[0]
     if layout is not None:
         test_poses = layout.tests
     else:
@@ -168,7 +160,9 @@ def run_with_geometry(
         test_poses = [center + (exp.test[0] + i * step) for i in range(n)]
     truth = _wrap(torch.tensor(test_poses, dtype=torch.float64)).to(x.dtype)
     tests = ((obj, obj, folder.images(obj, truth.tolist()), truth) for obj in objects)
-    return score(recognizer, tests, wrap=True, interpolate_pose=exp.interpolate_pose), x.shape[0]
+    return score(recognizer, tests, wrap=True, interpolate_pose=exp.interpolate_pose), sum(
+        b.shape[0] for b in blocks
+    )
 
 
 def _row(name: str, base: CoilExperiment, folder: CoilFolder) -> list[object]:

@@ -24,9 +24,7 @@ from concurrent.futures import ThreadPoolExecutor
 import torch
 
 from torch_eigview import (
-    EigenProjection,
-    Eigenspace,
-    NearestNeighborRecognizer,
+    FewViewEigenspace,
     NovelViewWarp,
     PerspectiveWarp,
     SynthesisOptions,
@@ -47,7 +45,6 @@ from torch_eigview.datasets import (
 )
 from torch_eigview.evaluation import score
 from torch_eigview.geometry import Correspondence
-from torch_eigview.nn import unit_rows
 from torch_eigview.scale import available_cpus
 from torch_eigview.synthesis import PairGeometry, pair_geometry, pair_of
 from torch_eigview.warp import foreground_mask
@@ -266,23 +263,6 @@ def synthetic_gallery(
     return out.views, thetas
 
 
-def build_recognizer(
-    views: torch.Tensor,
-    labels: torch.Tensor,
-    poses: torch.Tensor,
-    components: int | float,
-    label_names: list[str] | None = None,
-) -> NearestNeighborRecognizer:
-    """One eigenspace of the (P, C, H, W) gallery views, each scaled to unit norm, and the
-    nearest-neighbour recognizer over their coefficients (the COIL experiment's)."""
-    c, h, w = views.shape[1:]
-    space = Eigenspace(components).fit(unit_rows(views))
-    projection = EigenProjection(
-        space.mean_, space.components_, space.eigenvalues_, (c, h, w), unit_norm=True
-    )
-    return NearestNeighborRecognizer.from_views(projection, views, labels, poses, label_names)
-
-
 def _galleries(
     scene: SyntheticScene,
     names: Iterable[str],
@@ -330,19 +310,16 @@ def recognition_experiment(
     """
     scene = scene or SyntheticScene()
     t_start = time.perf_counter()
-    views, labels, poses = [], [], []
-    for i, (block, thetas) in enumerate(
-        _galleries(scene, scene.shapes, alpha, n_views, synth, correspondences)
-    ):
-        views.append(block)
-        labels += [i] * len(thetas)
-        poses += thetas
-    x = torch.cat(views)
+    galleries = list(_galleries(scene, scene.shapes, alpha, n_views, synth, correspondences))
+    x = torch.cat([block for block, _ in galleries])
     t_gallery = time.perf_counter()
     try:
-        recognizer = build_recognizer(
-            x, torch.tensor(labels), torch.tensor(poses, dtype=x.dtype), components, list(scene.shapes)
+        # The library's pipeline on galleries made here (synth=None: the views given are the
+        # gallery), each view scaled to unit norm as every experiment's.
+        est = FewViewEigenspace(components, synth=None).fit(
+            [block for block, _ in galleries], [thetas for _, thetas in galleries], labels=list(scene.shapes)
         )
+        recognizer = est.recognizer_
     except ValueError as exc:
         if "exceeds the rank" not in str(exc):
             raise

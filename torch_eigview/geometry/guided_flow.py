@@ -5,7 +5,7 @@ of a few pixels at its coarsest level, about ten at full size on 128 × 128 view
 two turntable views α apart a surface point at depth Z from the axis moves by up to
 ``|Z sin α|`` pixels: 45 px for Z = 64 at α = 45°, where TV-L1 alone finds almost none of
 the motion (on COIL-20, 45° pairs: its disparities are 0.07 of those chained through the
-real views 5° apart, ``python -m torch_eigview.apps.diagnose correspondence``).
+real views 5° apart, ``python examples/diagnostics/diagnose_flow.py``).
 
 The row matcher (:func:`~torch_eigview.geometry.row_matcher.match_rows`) searches the
 whole epipolar range the geometry allows, ``|Z| <= depth``, but in whole labels and with

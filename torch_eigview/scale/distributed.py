@@ -18,12 +18,12 @@ eigenspace of all P = Σ_r P_r views comes out identical on every rank:
 Bad input (a rank without views, different view sizes or dtypes across ranks) is found by
 one ``all_gather_object`` of each rank's metadata before any other collective, so every
 rank raises the same ``ValueError`` instead of hanging; the process group's ``timeout``
-(``init_process_group(timeout=...)``, which ``eigview``'s distributed command sets) ends a
-collective whose peer died.
+(``init_process_group(timeout=...)``) ends a collective whose peer died.
 
-Run it on COIL-20 (gloo on CPU, nccl where CUDA is available)::
+The repository's ``benchmarks/bench_distributed.py`` runs it on COIL-20 under torchrun
+(gloo on CPU, nccl where CUDA is available)::
 
-    torchrun --nproc_per_node 2 -m torch_eigview.apps.distributed --root ../shared/data/coil-20-proc --alpha 5
+    torchrun --nproc_per_node 2 benchmarks/bench_distributed.py --root ../shared/data/coil-20-proc --alpha 5
 """
 
 from __future__ import annotations
