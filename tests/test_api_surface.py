@@ -45,6 +45,7 @@ SUBPACKAGES = {
         "ALL_COMPONENTS",
         "AROUND_SEEDS",
         "FewViewEigenspace",
+        "MemoryBudgetError",
         "calibrate_rejection",
         "resolve_components",
     ],
@@ -86,6 +87,7 @@ SUBPACKAGES = {
     "decomposition": [
         "BlockSource",
         "Eigenspace",
+        "IncrementalEigenspace",
         "KernelEigenspace",
         "StreamingEigenspace",
         "blocks_of",

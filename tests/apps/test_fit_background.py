@@ -79,8 +79,15 @@ def test_fit_hands_the_seed_masks_to_synthesis_and_records_the_background(
         want = np.stack([skimage.io.imread(views / f"{name}{a}_m.png") > 0 for a in (0, 10)])
         assert sum(np.array_equal(m.numpy(), want) for m in seen if m is not None) == 1, name
     seen.clear()
-    code, _, err = run_cli(_fit(views, "views.csv", tmp_path / "k.pt"), capsys)  # keep: the threshold
-    assert code == 0 and seen == [None, None], err
+    code, out, err = run_cli(_fit(views, "views.csv", tmp_path / "k.pt", "--background", "keep"), capsys)
+    assert code == 0 and seen == [None, None], err  # keep, chosen: the threshold
+    assert "background keep (as given)" in out
+    seen.clear()
+    code, out, err = run_cli(_fit(views, "views.csv", tmp_path / "d.pt"), capsys)  # the default
+    assert code == 0 and len(seen) == 2 and all(m is not None for m in seen), err
+    assert "background auto (the manifest lists masks)" in out
+    _, meta = load_recognizer(tmp_path / "d.pt")
+    assert Preprocessing.from_json(meta["preprocessing"]).background == "auto"
 
 
 @pytest.mark.slow
@@ -172,3 +179,29 @@ def test_background_option_and_record() -> None:
         ValueError, match=r"damaged preprocessing record: .*tolerance must be a positive number"
     ):
         Preprocessing.from_json({**old, "background": "auto", "tolerance": -1}, "m.pt")
+
+
+def test_default_background_keeps_views_without_masks(
+    views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, err = run_cli(_fit(views, "nomask.csv", tmp_path / "m.pt"), capsys)
+    assert code == 0, err
+    assert "background keep (no masks given)" in out
+    _, meta = load_recognizer(tmp_path / "m.pt")
+    assert Preprocessing.from_json(meta["preprocessing"]).background == "keep"
+
+
+def test_memory_check_refuses_before_any_work(
+    views: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fit that would need more than is available stops at once, naming the sizes and the
+    command's remedies, and writes nothing."""
+    import torch_eigview.method.memory as memory
+
+    monkeypatch.setattr(memory, "available_memory", lambda: (1 << 20, "the address-space limit, ulimit -v"))
+    out = tmp_path / "m.pt"
+    code, _, err = run_cli(_fit(views, "views.csv", out), capsys)
+    assert code == 2 and not out.exists()
+    assert "the fit needs about" in err and "but only 0.00 GiB are available (the address-space limit" in err
+    assert "2 objects x 21 views and 36 held out" in err and "(C, H, W)=(1, 32, 32)" in err
+    assert "--size H W" in err and "--synth" in err

@@ -42,6 +42,7 @@ from torch_eigview.apps.view_options import (
     check_not_views,
     load_manifest,
     manifest_inputs,
+    resolve_background,
 )
 from torch_eigview.files import check_outputs
 
@@ -108,7 +109,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=None,
         help="1: gray, 3: RGB (default: the first view's)",
     )
-    add_background_arguments(fit)
+    add_background_arguments(fit, default=None)
     fit.add_argument(
         "-k", "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
     )
@@ -190,18 +191,28 @@ def _seed_angles(plan: SeedPlan) -> list[float]:
     return angles
 
 
+def _rule(fields: dict[str, object]) -> str:
+    """The background rule as --background spells it."""
+    colour = fields["colour"]
+    if fields["background"] == "colour" and isinstance(colour, tuple):
+        return ",".join(f"{255 * v:g}" for v in colour)
+    return str(fields["background"])
+
+
 def run_fit(args: argparse.Namespace) -> int:
     """Runs ``eigview fit`` on parsed arguments; returns the exit status."""
     from torch_eigview.datasets.background import background_rule
     from torch_eigview.geometry.angles import AROUND_SEEDS
     from torch_eigview.io.checkpoint import save_recognizer
+    from torch_eigview.io.images import read_image
     from torch_eigview.io.preprocessing import Preprocessing
     from torch_eigview.method.estimator import FewViewEigenspace
+    from torch_eigview.method.memory import MemoryBudgetError
     from torch_eigview.scale.parallel import object_workers
     from torch_eigview.synthesis import Circle
 
     check_outputs([("--out", args.out)], inputs=manifest_inputs(args))
-    fields = background_fields(args)
+    background_fields(args)  # a bad --tolerance is named before any file is read
     plan = seed_plan(args.seeds, args.circle, args.center, None if args.synth is None else tuple(args.synth))
     if plan.thetas is None and args.reject_poses is not None:
         raise ValueError(
@@ -224,6 +235,9 @@ def run_fit(args: argparse.Namespace) -> int:
             "give --size H W to resize the views"
         )
     size, channels = size or (first.shape[2], first.shape[3]), args.channels or first.shape[1]
+    alpha = read_image(picked[objects[0]][0].path, keep_alpha=True).shape[0] in (2, 4)
+    why = resolve_background(args, any(e.mask is not None for e in manifest), alpha)
+    fields = background_fields(args)
     unit_norm = not args.no_unit_norm
     prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm, **fields)
     background = background_rule(prep.background, prep.colour, prep.tolerance)
@@ -248,6 +262,13 @@ def run_fit(args: argparse.Namespace) -> int:
             masks=[masks for _, masks in read],
             progress=progress_bar(args.quiet, "fit objects", "obj"),
         )
+    except MemoryBudgetError as exc:  # before any synthesis: say what the command line can change
+        raise MemoryBudgetError(
+            exc.estimate,
+            exc.available,
+            exc.bound,
+            "give --size H W for smaller images, or a coarser --synth step for fewer views",
+        ) from None
     except ValueError as exc:
         if "exceeds the rank" not in str(exc):
             raise
@@ -279,6 +300,7 @@ def run_fit(args: argparse.Namespace) -> int:
     )
     print(
         f"wrote {args.out}: {len(objects)} objects, {n_views} gallery views of (C, H, W)={est.image_shape_}, "
-        f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees{rejects}"
+        f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees{rejects}; "
+        f"background {_rule(fields)} ({why})"
     )
     return 0

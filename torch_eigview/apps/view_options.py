@@ -27,6 +27,7 @@ __all__ = [
     "check_not_views",
     "load_manifest",
     "manifest_inputs",
+    "resolve_background",
 ]
 
 
@@ -75,16 +76,24 @@ _AUTO_HELP = (
 )
 
 
-def add_background_arguments(parser: argparse.ArgumentParser, auto: str = _AUTO_HELP) -> None:
+def add_background_arguments(
+    parser: argparse.ArgumentParser, auto: str = _AUTO_HELP, default: str | None = "keep"
+) -> None:
     """``--background keep|auto|R,G,B`` and ``--tolerance T`` (both on the 0-255 scale);
-    ``auto`` the help's words for ``--background auto``."""
+    ``auto`` the help's words for ``--background auto``; ``default`` None: the rule follows
+    the masks given (:func:`resolve_background`)."""
+    chosen = (
+        ""
+        if default is not None
+        else " By default auto where the views come with masks (a mask column, an alpha channel), else keep"
+    )
     parser.add_argument(
         "--background",
         type=background_arg,
-        default="keep",
+        default=default,
         metavar="keep|auto|R,G,B",
         help=f"keep: pixels as read (black-background data); {auto}; "
-        "R,G,B: that background colour, 0-255. Except with keep the background is set to 0",
+        f"R,G,B: that background colour, 0-255. Except with keep the background is set to 0.{chosen}",
     )
     parser.add_argument(
         "--tolerance",
@@ -104,12 +113,25 @@ def background_fields(args: argparse.Namespace) -> dict[str, Any]:
         ValueError: ``--tolerance`` with ``--background keep``.
     """
     choice = args.background
-    if args.tolerance is not None and choice == "keep":
+    if args.tolerance is not None and choice in ("keep", None):
         raise ValueError("--tolerance goes with --background auto or R,G,B, not with keep")
     tolerance = None if args.tolerance is None else args.tolerance / 255.0
     if isinstance(choice, tuple):
         return {"background": "colour", "colour": choice, "tolerance": tolerance}
     return {"background": choice, "colour": None, "tolerance": tolerance}
+
+
+def resolve_background(args: argparse.Namespace, has_masks: bool, has_alpha: bool) -> str:
+    """Sets ``args.background`` where it was left to the default: ``auto`` when the views
+    come with masks (the manifest's mask column, an alpha channel), else ``keep``; returns
+    the rule and why, for the command to say."""
+    if args.background is not None:
+        return "as given"
+    if has_masks or has_alpha:
+        args.background = "auto"
+        return "the manifest lists masks" if has_masks else "the images have an alpha channel"
+    args.background = "keep"
+    return "no masks given"
 
 
 def manifest_inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:

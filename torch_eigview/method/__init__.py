@@ -5,6 +5,14 @@ from __future__ import annotations
 from torch_eigview.geometry.angles import AROUND_SEEDS
 from torch_eigview.method.estimator import FewViewEigenspace
 from torch_eigview.method.inputs import ALL_COMPONENTS, resolve_components
+from torch_eigview.method.memory import MemoryBudgetError
 from torch_eigview.method.rejection import calibrate_rejection
 
-__all__ = ["ALL_COMPONENTS", "AROUND_SEEDS", "FewViewEigenspace", "calibrate_rejection", "resolve_components"]
+__all__ = [
+    "ALL_COMPONENTS",
+    "AROUND_SEEDS",
+    "FewViewEigenspace",
+    "MemoryBudgetError",
+    "calibrate_rejection",
+    "resolve_components",
+]

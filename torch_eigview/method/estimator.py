@@ -27,10 +27,12 @@ import torch
 
 from torch_eigview.check import check_choice, check_int
 from torch_eigview.decomposition.eigenspace import Eigenspace
+from torch_eigview.decomposition.incremental import IncrementalEigenspace
 from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.decomposition.streaming import StreamingEigenspace
 from torch_eigview.errors import NotFittedError
 from torch_eigview.geometry.angles import AROUND_SEEDS, held_out_range, off_gallery
+from torch_eigview.method.gallery import GalleryFit
 from torch_eigview.method.inputs import (
     Params,
     block_item,
@@ -46,6 +48,7 @@ from torch_eigview.method.inputs import (
     warn_unnormalized_seeds,
     wrap_degrees,
 )
+from torch_eigview.method.memory import check_memory, fit_estimate
 from torch_eigview.method.rejection import REJECT_SCORES, calibrate_rejection, check_reject_rate
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
@@ -53,12 +56,15 @@ from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
 from torch_eigview.scale.galleries import ObjectJob, object_galleries
 from torch_eigview.scale.parallel import KINDS, group_size
-from torch_eigview.scale.thread_policy import eigen_flops, for_products
-from torch_eigview.synthesis import Circle, SynthesisOptions, SynthesizedViews
+from torch_eigview.synthesis import Circle, SynthesisOptions, SynthesizedViews, circle_thetas
 
-__all__ = ["FewViewEigenspace"]
+__all__ = ["MEMORY_REMEDIES", "FewViewEigenspace"]
 
-Gallery = tuple[torch.Tensor, int, list[float]]  # (T, C, H, W) views, label, T poses (degrees)
+#: What a fit refused for its memory can change (:class:`~torch_eigview.method.memory.MemoryBudgetError`).
+MEMORY_REMEDIES = (
+    "give smaller images, fewer synthesized views (a coarser synth step) or, for a gallery held at once, "
+    "a smaller max_views (the fit then merges it block by block)"
+)
 
 
 class FewViewEigenspace:
@@ -85,7 +91,16 @@ class FewViewEigenspace:
         gamma: the kernel's γ (a number, "median" for rbf, or None: 1/N).
         synth_follows_seeds: with more than two seeds, extend a (start, stop, step) ``synth`` on the seeds'
             side by the steps past the first pair (as ``CoilExperiment``).
-        max_views: the most gallery views :meth:`fit_blocks` holds at once.
+        max_views: the most gallery views held at once. ``fit`` fits a gallery of at most
+            this many views at once, its exact eigenspace; a larger one is merged as it is
+            synthesized, a block of about ``max_rank`` views at a time
+            (:class:`~torch_eigview.decomposition.incremental.IncrementalEigenspace`), so that
+            its memory no longer grows with the number of objects (a kernel eigenspace is
+            always fitted at once). :meth:`fit_blocks` holds at most this many per pass.
+        max_rank: the most eigenpairs the merged eigenspace keeps (>= an int
+            ``n_components``): up to it every merge is exact; past it each merge drops its
+            smallest, and ``eigenspace_.truncation_bound_`` bounds how much lower that leaves
+            the kept eigenvalues.
         reject_rate: None (no rejection), or the fraction in (0, 1) of known views one
             accepts to reject as unknown: ``fit`` calibrates the recognizer's thresholds
             on views synthesized at ``reject_poses`` (:func:`calibrate_rejection`); 0.05
@@ -142,6 +157,7 @@ class FewViewEigenspace:
         reject_poses: tuple[float, float, float] | str = AROUND_SEEDS,
         workers: int = 0,
         worker_kind: str = "thread",
+        max_rank: int = 512,
     ) -> None:
         self.n_components = n_components
         self.synth = synth
@@ -156,6 +172,7 @@ class FewViewEigenspace:
         self.reject_poses = reject_poses
         self.workers = workers
         self.worker_kind = worker_kind
+        self.max_rank = max_rank
 
     def __repr__(self) -> str:
         return f"FewViewEigenspace(n_components={self.n_components!r}, synth={self.synth!r}, kernel={self.kernel!r})"
@@ -182,7 +199,14 @@ class FewViewEigenspace:
             check_int(self.max_views, "max_views", 1),
             check_int(self.workers, "workers", minimum=0),
             check_choice(self.worker_kind, "worker_kind", KINDS),
+            self._max_rank(n_components),
         )
+
+    def _max_rank(self, n_components: int | float) -> int:
+        rank = check_int(self.max_rank, "max_rank", minimum=1)
+        if isinstance(n_components, int) and rank < n_components:
+            raise ValueError(f"max_rank={rank} must be at least n_components={n_components}")
+        return rank
 
     def _reject_params(self, synth: object) -> tuple[float, str, tuple[float, float, float] | str] | None:
         if self.reject_rate is None:
@@ -260,35 +284,62 @@ class FewViewEigenspace:
             warn_unnormalized_seeds(objects, params.options)
         self.elevations_: list[list[float]] = []
         self.seconds_: dict[str, float] = {"correspondence": 0.0, "synthesis": 0.0, "eigen": 0.0}
-        views: list[torch.Tensor] = []
-        gallery_labels: list[int] = []
-        poses: list[float] = []
-        held_out: list[torch.Tensor] = []
-        ticks = names if names is not None else label_list
-        for block, label, block_poses in self._galleries(
-            params,
-            objects,
-            angles,
-            label_list,
-            seed_masks,
-            None if reject is None else reject[2],
-            held_out,
-            progress(ticks) if progress else ticks,
-        ):
-            views.append(block)
-            gallery_labels += [label] * len(block_poses)
-            poses += block_poses
-        x = torch.cat(views)
-        t0 = time.perf_counter()
-        with torch.no_grad():
-            self._fit_gallery(
-                params, x, torch.tensor(gallery_labels), torch.tensor(poses, dtype=x.dtype), names
+        held_poses = None if reject is None else reject[2]
+        plans = None if params.synth is None else self._jobs(params, objects, angles, seed_masks, held_poses)
+        sizes = self._gallery_sizes(params, objects, plans, held_poses is not None)
+        if objects[0].device.type == "cpu":
+            estimate = fit_estimate(
+                objects=len(objects),
+                views=max(g for g, _ in sizes),
+                held_out=max(h for _, h in sizes),
+                image_shape=(objects[0].shape[1], objects[0].shape[2], objects[0].shape[3]),
+                itemsize=objects[0].element_size(),
+                components=params.n_components,
+                max_views=params.max_views,
+                max_rank=params.max_rank,
+                kernel=params.kernel is not None,
+                workers=params.workers,
             )
-        self.seconds_["eigen"] = time.perf_counter() - t0
-        self.n_calibration_views_ = sum(v.shape[0] for v in held_out)
+            check_memory(estimate, MEMORY_REMEDIES)
+        gallery = GalleryFit(params, sum(g for g, _ in sizes), len(objects))
+        ticks = names if names is not None else label_list
+        for block, label, block_poses, held in self._galleries(
+            params, objects, angles, label_list, plans, held_poses, progress(ticks) if progress else ticks
+        ):
+            t0 = time.perf_counter()
+            gallery.add(block, label, block_poses, held)
+            self.seconds_["eigen"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        space, projection, recognizer = gallery.finish(names)
+        assert gallery.image_shape is not None
+        self._set_fitted(space, projection, recognizer, gallery.image_shape)
+        self.seconds_["eigen"] += time.perf_counter() - t0
+        self.n_calibration_views_ = sum(v.shape[0] for v in gallery.held_out)
         if reject is not None:
-            calibrate_rejection(self.recognizer_, torch.cat(held_out), reject[0], reject[1])
+            with torch.no_grad():
+                calibrate_rejection(self.recognizer_, torch.cat(gallery.held_out), reject[0], reject[1])
         return self
+
+    @staticmethod
+    def _gallery_sizes(
+        params: Params,
+        objects: list[torch.Tensor],
+        plans: list[tuple[ObjectJob, int, list[float]]] | None,
+        held: bool,
+    ) -> list[tuple[int, int]]:
+        """Per object its gallery views and its held-out views, before any is made."""
+        if plans is None:
+            return [(v.shape[0], 0) for v in objects]
+        sizes = []
+        for job, n, _ in plans:
+            if n >= 0:
+                sizes.append((n, len(job.thetas or []) - n))
+            else:  # the full circle: every pair's sector, and as many midpoints held out
+                assert isinstance(params.synth, Circle)
+                m = job.seeds.shape[0]
+                count = m * len(circle_thetas(m, params.synth.step, params.synth.overlap))
+                sizes.append((count, count if held else 0))
+        return sizes
 
     def _jobs(
         self,
@@ -324,21 +375,19 @@ class FewViewEigenspace:
         objects: list[torch.Tensor],
         angles: list[list[float]],
         labels: list[int],
-        masks: list[torch.Tensor | None],
+        plans: list[tuple[ObjectJob, int, list[float]]] | None,
         held_poses: tuple[float, float, float] | str | None,
-        held_out: list[torch.Tensor],
         ticks: Iterable[Hashable],
-    ) -> Iterator[Gallery]:
+    ) -> Iterator[tuple[torch.Tensor, int, list[float], torch.Tensor | None]]:
         """Per object its gallery views, label and poses (degrees, unwrapped), synthesized
-        over ``params.workers``; appends its elevations to ``elevations_``, its times to
-        ``seconds_`` and to ``held_out`` its views synthesized at ``held_poses`` (start,
-        stop, step, or :data:`AROUND_SEEDS`) that are not gallery poses (in the same call,
-        from the same geometry)."""
-        if params.synth is None:
+        over ``params.workers`` from ``plans`` (:meth:`_jobs`), and its views synthesized at
+        ``held_poses`` (start, stop, step, or :data:`AROUND_SEEDS`) that are not gallery
+        poses (in the same call, from the same geometry; None without); appends its
+        elevations to ``elevations_`` and its times to ``seconds_``."""
+        if plans is None:
             for views, seed_angles, label, _ in zip(objects, angles, labels, ticks, strict=True):
-                yield views, label, seed_angles
+                yield views, label, seed_angles, None
             return
-        plans = self._jobs(params, objects, angles, masks, held_poses)
         circle = params.synth if isinstance(params.synth, Circle) else Circle()
         if isinstance(params.synth, Circle) and held_poses is not None:
             circle = Circle(circle.step / 2, circle.overlap)  # the midpoints are held out
@@ -357,8 +406,7 @@ class FewViewEigenspace:
                 self.seconds_[key] = self.seconds_.get(key, 0.0) + value
             self.elevations_.append(out.elevations)
             gallery, gallery_thetas, held = self._split(out, n, thetas, held_poses is not None, circle.step)
-            held_out.append(held)
-            yield gallery, label, [seed_angles[0] + t for t in gallery_thetas]
+            yield gallery, label, [seed_angles[0] + t for t in gallery_thetas], held
 
     @staticmethod
     def _split(
@@ -376,34 +424,9 @@ class FewViewEigenspace:
         mid = ((out.thetas - out.pairs * alpha) / step).round().long() % 2 == 1
         return out.views[~mid], out.thetas[~mid].tolist(), out.views[mid]
 
-    def _fit_gallery(
-        self,
-        params: Params,
-        x: torch.Tensor,
-        labels: torch.Tensor,
-        poses: torch.Tensor,
-        names: list[str] | None = None,
-    ) -> None:
-        """The eigenspace of the gallery views x (P, C, H, W), the layer and the recognizer."""
-        c, h, w = x.shape[1:]
-        x_fit = unit_rows(x) if params.unit_norm else x.flatten(1)
-        projection: EigenProjection | KernelProjection
-        space: Eigenspace | KernelEigenspace
-        if params.kernel is None:
-            # A command's policy gives a large Gram product the idle CPUs (a no-op in library use).
-            with for_products(eigen_flops(*x_fit.shape)):
-                space = linear = Eigenspace(params.n_components).fit(x_fit)
-            projection = linear.to_module(unit_norm=params.unit_norm, image_shape=(c, h, w))
-        else:
-            kspace = KernelEigenspace(params.n_components, kernel=params.kernel, gamma=params.gamma)
-            space = kspace.fit(x_fit.reshape(-1, c, h, w))
-            projection = kspace.to_module(unit_norm=params.unit_norm)
-        recognizer = NearestNeighborRecognizer.from_views(projection, x, labels, wrap_degrees(poses), names)
-        self._set_fitted(space, projection, recognizer, (c, h, w))
-
     def _set_fitted(
         self,
-        space: Eigenspace | KernelEigenspace | StreamingEigenspace,
+        space: Eigenspace | KernelEigenspace | StreamingEigenspace | IncrementalEigenspace,
         projection: EigenProjection | KernelProjection,
         recognizer: NearestNeighborRecognizer,
         image_shape: tuple[int, int, int],

@@ -73,6 +73,7 @@ class Params:
     max_views: int
     workers: int = 0
     worker_kind: str = "thread"
+    max_rank: int = 512
 
     def thetas(self, steps: list[float]) -> list[float]:
         """Gallery angles relative to the first seed, for seeds ``steps`` apart: with

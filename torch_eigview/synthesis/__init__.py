@@ -24,7 +24,7 @@ view between two seeds, by Eq. 2 over its correspondences with both.
 
 from __future__ import annotations
 
-from torch_eigview.synthesis.circle import Circle, check_overlap, synthesize_circle
+from torch_eigview.synthesis.circle import Circle, check_overlap, circle_thetas, synthesize_circle
 from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.synthesis.seed_pairs import (
     MAX_AUTO_ELEVATION,
@@ -47,6 +47,7 @@ __all__ = [
     "SynthesizedViews",
     "check_overlap",
     "check_seeds",
+    "circle_thetas",
     "iter_object_geometries",
     "object_geometries",
     "pair_geometry",

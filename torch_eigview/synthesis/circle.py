@@ -23,7 +23,7 @@ from torch_eigview.synthesis.options import SynthesisOptions
 from torch_eigview.synthesis.seed_pairs import PairGeometry
 from torch_eigview.synthesis.views import SynthesizedViews, synthesize_views
 
-__all__ = ["Circle", "check_overlap", "synthesize_circle"]
+__all__ = ["Circle", "check_overlap", "circle_thetas", "synthesize_circle"]
 
 _TOL = 1e-6
 
@@ -60,6 +60,23 @@ def check_overlap(m: int, overlap: object, name: str = "overlap") -> float:
             f"90 - alpha = {90 - alpha:g} (M={m}: Eq. 7 holds within a quarter turn of a pair's first seed)"
         )
     return value
+
+
+def circle_thetas(m: int, step: float, overlap: float = 0.0) -> list[float]:
+    """The angles each of the M seed pairs synthesizes, degrees from its first seed: every
+    ``step`` over its sector [0, 360/M), and ``overlap`` degrees past both of its seeds.
+
+    Example:
+        >>> circle_thetas(4, 30.0), circle_thetas(6, 20.0, overlap=20.0)
+        ([0.0, 30.0, 60.0], [-20.0, 0.0, 20.0, 40.0, 80.0])
+    """
+    alpha = 360.0 / m
+    overlap = check_overlap(m, overlap)
+    thetas = [t for t in angle_range(0.0, alpha, step, "Circle.step") if t < alpha - _TOL]
+    n_out = math.floor(overlap / step + _TOL)
+    return (
+        [-step * i for i in range(n_out, 0, -1)] + thetas + [alpha + step * i for i in range(n_out + 1)][1:]
+    )
 
 
 def synthesize_circle(
@@ -103,12 +120,7 @@ def synthesize_circle(
     if geometry is not None and len(geometry) != m:
         raise ValueError(f"geometry must hold one record per seed pair (M = {m}), got {len(geometry)}")
     alpha = 360.0 / m
-    overlap = check_overlap(m, overlap)
-    thetas = [t for t in angle_range(0.0, alpha, step, "circle step") if t < alpha - _TOL]
-    n_out = math.floor(overlap / step + _TOL)
-    thetas = (
-        [-step * i for i in range(n_out, 0, -1)] + thetas + [alpha + step * i for i in range(n_out + 1)][1:]
-    )
+    thetas = circle_thetas(m, step, overlap)
     views, elevations, seconds = [], [], {"correspondence": 0.0, "synthesis": 0.0}
     for k in range(m):
         pair = [k, (k + 1) % m]

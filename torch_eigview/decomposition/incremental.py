@@ -1,0 +1,295 @@
+"""An eigenspace merged block by block, in memory bounded by one block and its own state.
+
+The views arrive once, block by block (one object's synthesized gallery, say), and are
+not kept. The model after P views is the mean μ, an orthonormal basis U (N × r) and the
+eigenvalues s (r,) of the centred scatter matrix it represents, U diag(s) Uᵀ. Merging a
+block X (B × N) with mean μ_b is the merge of two eigenspace models (Hall, Marshall and
+Martin, "Merging and splitting eigenspace models", 2000; Levy and Lindenbaum's sequential
+Karhunen–Loève update, 2000) in one identity of scatter matrices:
+
+    S' = U diag(s) Uᵀ + Xcᵀ Xc + c cᵀ,   c = √(P B / (P + B)) (μ_b − μ),
+
+so S' = M Mᵀ with M = [U diag(√s), Xcᵀ, c] (N × (r + B + 1)), whose eigenpairs come from
+the small Gram matrix K = Mᵀ M (U being orthonormal, its leading block is diag(s)
+exactly): K = V Λ Vᵀ, U' = M V Λ^(−1/2). Nothing N × N and nothing P × P is ever formed:
+memory is the block, the basis and a few (r + B)-sized matrices, whatever P.
+
+The model keeps at most ``max_rank`` eigenpairs. Up to that rank the merge is exact (the
+eigenspace equals :class:`~torch_eigview.decomposition.eigenspace.Eigenspace`'s on the
+stacked views up to rounding); past it the smallest eigenpairs of each merge are dropped.
+A dropped part is a positive semidefinite matrix whose norm is the largest eigenvalue
+dropped, so by Weyl's inequality every kept eigenvalue is low by at most the sum, over the
+merges, of the largest eigenvalue each dropped: ``truncation_bound_``, reported with the
+fit (0 when nothing was dropped).
+
+With ``keep_codes=True`` the model also carries every view's coordinates in its basis,
+rotated at each merge by the same small matrices (no product of size N): ``codes_`` are the
+views' coordinates in the final components, exact below the rank cap.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from torch_eigview.check import check_float_tensor, check_int, check_magnitude, check_ndim
+from torch_eigview.decomposition._fitted import DTYPES, FittedEigenspace
+from torch_eigview.decomposition.linalg import EigenFit, centred_k, numerical_rank
+from torch_eigview.errors import NotFittedError
+
+__all__ = ["IncrementalEigenspace"]
+
+
+class IncrementalEigenspace(FittedEigenspace):
+    """Eigenspace of views merged block by block (``partial_fit``), each block seen once.
+
+    Args:
+        n_components: k (int) or an energy fraction in (0, 1) of the views seen.
+        max_rank: the most eigenpairs the running model keeps, >= the int k: up to it every
+            merge is exact; past it each merge drops its smallest eigenpairs, and
+            ``truncation_bound_`` bounds how low that leaves the kept eigenvalues.
+        keep_codes: also carry every view's coordinates (``codes_``), P × ``max_rank``
+            numbers in memory.
+
+    After a merge, ``mean_``, ``components_``, ``eigenvalues_`` and
+    ``explained_variance_ratio_`` are those of
+    :class:`~torch_eigview.decomposition.eigenspace.Eigenspace`; ``truncation_bound_``
+    is the sum over the merges of the largest eigenvalue each dropped (every eigenvalue is
+    at most this much below the exact eigenspace's; 0 when none was dropped), and
+    ``discarded_energy_``, ``n_samples_seen_`` and ``codes_`` are below.
+
+    Example:
+        >>> x = torch.rand(30, 1, 6, 6, dtype=torch.float64)
+        >>> inc = IncrementalEigenspace(4)
+        >>> for block in x.split(7):
+        ...     _ = inc.partial_fit(block)
+        >>> from torch_eigview.decomposition import Eigenspace
+        >>> exact = Eigenspace(4).fit(x)
+        >>> bool(torch.allclose(inc.eigenvalues_, exact.eigenvalues_)), inc.truncation_bound_
+        (True, 0.0)
+    """
+
+    _FIT_CALLS = "partial_fit or fit"
+
+    def __init__(
+        self, n_components: int | float = 15, *, max_rank: int = 512, keep_codes: bool = False
+    ) -> None:
+        super().__init__(n_components)
+        self.max_rank = max_rank
+        self.keep_codes = keep_codes
+
+    def __repr__(self) -> str:
+        return f"IncrementalEigenspace(n_components={self.n_components!r}, max_rank={self.max_rank!r})"
+
+    # ------------------------------------------------------------------ the running model
+    def _reset(self) -> None:
+        self._mean: torch.Tensor | None = None  # (N,) float64
+        self._basis: torch.Tensor | None = None  # (N, r) in the data's dtype, orthonormal columns
+        self._eigvals = torch.zeros(0, dtype=torch.float64)  # (r,) of the scatter
+        self._codes: list[torch.Tensor] = []  # per block (B, r) in the current basis
+        self._n = 0
+        self._total = 0.0  # the trace of the scatter of every view seen
+        self._uncentred = 0.0  # ‖X‖², for the rank tolerance of the centring
+        self.truncation_bound_ = 0.0
+        self._dropped = 0.0
+        self._shape: tuple[int, int, int] | None = None
+        self._dtype: torch.dtype | None = None
+
+    def partial_fit(self, X: torch.Tensor) -> IncrementalEigenspace:
+        """Merges a block of views into the model.
+
+        Args:
+            X: (B, N) or (B, C, H, W) views, B >= 1, the dtype and size of the first block's.
+
+        Returns:
+            self, its eigenspace that of every view merged so far.
+
+        Raises:
+            TypeError, ValueError: a bad ``n_components``, ``max_rank`` or block; the
+                message names it.
+        """
+        max_rank = check_int(self.max_rank, "max_rank", minimum=1)
+        if isinstance(self.n_components, int) and self.n_components > max_rank:
+            raise ValueError(f"max_rank={max_rank} must be at least n_components={self.n_components}")
+        if not hasattr(self, "_n"):
+            self._reset()
+        x, shape = blocks_of_views(X, self._shape, self._dtype)
+        if self._mean is not None and x.shape[1] != self._mean.shape[0]:
+            raise ValueError(
+                f"X must hold views of the first block's N={self._mean.shape[0]} values, got shape {tuple(X.shape)}"
+            )
+        self._shape, self._dtype = shape, x.dtype
+        with torch.no_grad():
+            self._merge(x, max_rank)
+        self._stale = True  # the record is made when first read (a merge may leave rank 0)
+        return self
+
+    def _fitted(self, what: str) -> EigenFit:
+        if getattr(self, "_n", 0) == 0:
+            return super()._fitted(what)
+        if getattr(self, "_stale", False):
+            with torch.no_grad():
+                self._state = self._record()
+            self._stale = False
+        return super()._fitted(what)
+
+    def _merge(self, x: torch.Tensor, max_rank: int) -> None:
+        """The merge of the module's docstring, with ``x`` (B, N) in the data's dtype: the
+        products of size N run in it (float32 data: the speed of a float32 GEMM, rounding
+        far below a truncation's), the small matrices, the mean and the eigenproblem in
+        float64."""
+        b, w = x.shape[0], x.dtype
+        mean_b = x.mean(0, dtype=torch.float64)
+        xc = x - mean_b.to(w)
+        gram = (xc @ xc.T).double()  # (B, B)
+        self._uncentred += float(x.square().sum(dtype=torch.float64))
+        if self._mean is None or self._basis is None:
+            k_small = gram
+            n_old, root, weight = 0, torch.zeros(0, dtype=torch.float64), 0.0
+            p = u_c = g = c = None
+            cc = 0.0
+            r = 0
+        else:
+            n_old, basis, s = self._n, self._basis, self._eigvals
+            r = s.shape[0]
+            weight = math.sqrt(n_old * b / (n_old + b))
+            c = (weight * (mean_b - self._mean)).to(w)
+            root = s.clamp_min(0).sqrt()
+            p = (basis.T @ xc.T).double()  # (r, B)
+            u_c = (basis.T @ c).double()  # (r,)
+            g = (xc @ c).double()  # (B,)
+            cc = float(c.double() @ c.double())
+            k_mat = torch.zeros(r + b + 1, r + b + 1, dtype=torch.float64)
+            k_mat[:r, :r] = torch.diag(s)
+            k_mat[:r, r : r + b] = root[:, None] * p
+            k_mat[:r, -1] = root * u_c
+            k_mat[r : r + b, r : r + b] = gram
+            k_mat[r : r + b, -1] = g
+            k_mat[-1, -1] = cc
+            k_small = k_mat.triu() + torch.triu(k_mat, 1).T
+        lam, vec = torch.linalg.eigh(k_small)
+        lam, vec = lam.flip(0), vec.flip(1)
+        n_new = n_old + b
+        self._total += float(gram.diagonal().sum()) + cc
+        dtype = self._dtype or torch.float64
+        rank = numerical_rank(lam, n_new, x.shape[1], dtype, self._uncentred)
+        keep = min(max_rank, rank)
+        keep_vec = vec[:, :keep]  # none for identical views so far: nothing to span yet
+        if rank > keep:  # the cap, not rounding, drops eigenpairs: Weyl's bound grows
+            self.truncation_bound_ += float(lam[keep])
+            self._dropped += float(lam[keep:rank].sum())
+        lam_k = lam[:keep]
+        inv = lam_k.rsqrt() if keep else lam_k
+        # U' = M V Λ^(-1/2), M = [U diag(√s), Xcᵀ, c] (the first block: M = Xcᵀ).
+        if self._basis is None:
+            new_basis = (xc.T @ keep_vec.to(w)) * inv.to(w)
+            rot_new = (gram @ keep_vec) * inv  # (B, r'): the block's own coordinates
+            rot_old = None
+            shift = None
+        else:
+            assert p is not None and u_c is not None and g is not None and c is not None
+            v_old, v_blk, v_c = keep_vec[:r], keep_vec[r : r + b], keep_vec[r + b]
+            new_basis = (
+                self._basis @ (root[:, None] * v_old).to(w) + xc.T @ v_blk.to(w) + c[:, None] * v_c.to(w)
+            ) * inv.to(w)
+            # Uᵀ-free rotations: U'ᵀ U, U'ᵀ d and U'ᵀ Xcᵀ from the small matrices alone.
+            rot_old = (v_old * root[:, None] + p @ v_blk + u_c[:, None] * v_c) * inv  # (r, r'): Uᵀ U'
+            t = ((root * u_c) @ v_old + g @ v_blk + cc * v_c) * inv / weight  # (r',): U'ᵀ d
+            shift = t
+            rot_new = ((p.T * root) @ v_old + gram @ v_blk + g[:, None] * v_c) * inv  # (B, r'): Xc U'
+        if self.keep_codes:
+            if rot_old is not None and shift is not None:
+                # Old views: x ≈ μ + U a, so a' = U'ᵀ(U a + μ − μ') = (Uᵀ U')ᵀ a − (B/P') U'ᵀ d.
+                self._codes = [a @ rot_old - (b / n_new) * shift for a in self._codes]
+                rot_new = rot_new + (n_old / n_new) * shift  # the block: U'ᵀ(x − μ'), μ_b − μ' = (P/P') d
+            self._codes.append(rot_new)
+        self._basis, self._eigvals = new_basis, lam_k
+        self._mean = mean_b if self._mean is None else self._mean + (b / n_new) * (mean_b - self._mean)
+        self._n = n_new
+
+    def _record(self) -> EigenFit:
+        assert self._mean is not None and self._basis is not None and self._dtype is not None
+        k = centred_k(
+            self.n_components,
+            self._eigvals,
+            torch.tensor(self._total, dtype=torch.float64),
+            self._mean,
+            self._n,
+            self._dtype,
+            "the views merged",
+        )
+        components = self._basis[:, :k].T
+        fit = EigenFit.from_eigenpairs(
+            self._mean,
+            components,
+            self._eigvals[:k],
+            torch.tensor(self._total, dtype=torch.float64),
+            self._n,
+            self._shape,
+            self._dtype,
+        )
+        self._signs = (fit.components.double() * components.double()).sum(1).sign()  # peak_signs flips
+        return fit
+
+    @property
+    def n_samples_seen_(self) -> int:
+        """P, the views merged so far."""
+        self._fitted("n_samples_seen_")
+        return self._n
+
+    @property
+    def discarded_energy_(self) -> float:
+        """Σ of the dropped eigenvalues as a fraction of the trace (0 when none was)."""
+        self._fitted("discarded_energy_")
+        return self._dropped / self._total if self._total > 0 else 0.0
+
+    @property
+    def codes_(self) -> torch.Tensor:
+        """(P, k) coordinates of the views merged, in ``components_`` (``keep_codes``)."""
+        fit = self._fitted("codes_")
+        if not self.keep_codes:
+            raise NotFittedError("codes_ needs keep_codes=True before the first partial_fit")
+        k = fit.n_components
+        codes = torch.cat(self._codes)[:, :k] * self._signs
+        return codes.to(fit.dtype)
+
+    def fit(self, X: object) -> IncrementalEigenspace:
+        """Forgets any earlier merge and merges ``X``: a (P, N) or (P, C, H, W) tensor, in
+        blocks of ``max_rank`` views, or an iterable of such blocks.
+
+        Raises:
+            ValueError: no view.
+        """
+        self._reset()
+        self._state = None
+        if isinstance(X, torch.Tensor):
+            blocks = list(X.split(check_int(self.max_rank, "max_rank", minimum=1)))
+        else:
+            blocks = list(X)  # type: ignore[call-overload]
+        for block in blocks:
+            self.partial_fit(block)
+        if self._n == 0:
+            raise ValueError("X must hold at least one view, got none")
+        self._fitted("fit")  # the record, or the error of a gallery of rank 0, now
+        return self
+
+
+def blocks_of_views(
+    X: object, shape: tuple[int, int, int] | None, dtype: torch.dtype | None
+) -> tuple[torch.Tensor, tuple[int, int, int] | None]:
+    """A block as (B, N) rows and its (C, H, W), checked against the earlier blocks'."""
+    x = check_float_tensor(X, "X")
+    if x.dtype not in DTYPES:
+        raise TypeError(f"X must have dtype float32 or float64, got {x.dtype}")
+    check_ndim(x, "X", (2, 4), "(B, N) or (B, C, H, W)")
+    if x.shape[0] < 1 or math.prod(x.shape[1:]) == 0:
+        raise ValueError(f"X must hold at least one view of at least one value, got shape {tuple(x.shape)}")
+    if dtype is not None and x.dtype != dtype:
+        raise TypeError(f"X must have the first block's dtype {dtype}, got {x.dtype}")
+    block_shape = (x.shape[1], x.shape[2], x.shape[3]) if x.ndim == 4 else None
+    flat = x.detach().reshape(x.shape[0], -1)
+    if shape is not None and (block_shape not in (None, shape) or flat.shape[1] != math.prod(shape)):
+        raise ValueError(f"X must hold views of the first block's shape {shape}, got {tuple(x.shape[1:])}")
+    check_magnitude(flat, "X", max(flat.shape))
+    return flat, shape if shape is not None else block_shape
