@@ -281,3 +281,12 @@ def test_masks_go_to_synthesis(seeds: torch.Tensor) -> None:
         FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[masks[0].float(), None, None])
     with pytest.raises(ValueError, match=r"masks must hold one entry per object \(3\), got 2"):
         FewViewEigenspace(8).fit(seeds, [0.0, 10.0], masks=[None, None])
+
+
+def test_angles_past_a_quarter_turn_from_their_seed_are_refused_by_name(seeds: torch.Tensor) -> None:
+    """Before any synthesis: the gallery or the held-out views a pair would make from 90
+    degrees or more past its first seed, named with the seeds and how far they reach."""
+    with pytest.raises(ValueError, match=r"synth asks for views 105 degrees .* seeds at 0, 10 degrees"):
+        FewViewEigenspace(3, synth=(-20.0, 105.0, 5.0), synth_follows_seeds=False).fit(seeds, [0.0, 10.0])
+    with pytest.raises(ValueError, match=r"reject_poses asks for views 100 degrees"):
+        FewViewEigenspace(3, reject_rate=0.1, reject_poses=(-100.0, 20.0, 5.0)).fit(seeds, [0.0, 10.0])

@@ -270,7 +270,19 @@ def run_fit(args: argparse.Namespace) -> int:
             "give --size H W for smaller images, or a coarser --synth step for fewer views",
         ) from None
     except ValueError as exc:
-        if "exceeds the rank" not in str(exc):
+        text = str(exc)
+        for api, flag in (("synth asks", "--synth asks"), ("reject_poses asks", "--reject-poses asks")):
+            if text.startswith(api):  # name the flags: the seeds and the range come from them
+                raise ValueError(
+                    flag
+                    + text[len(api) :]
+                    .replace(", with seeds at", ", with --seeds at")
+                    .replace(
+                        f"narrow {api.split()[0]},",
+                        f"narrow {flag.split()[0]} (or choose --seeds closer together),",
+                    )
+                ) from None
+        if "exceeds the rank" not in text:
             raise
         # The cause is the -k the command line chose (or its default), not an internal argument.
         if plan.thetas is None:  # every step of each pair's sector [0, alpha)

@@ -40,6 +40,7 @@ from torch_eigview.method.inputs import (
     check_angles,
     check_circle_angles,
     check_labels,
+    check_reach,
     check_seed_masks,
     check_seeds,
     check_synth,
@@ -366,6 +367,7 @@ class FewViewEigenspace:
             thetas = params.thetas(steps)
             poses_o = held_out_range(steps) if isinstance(held_poses, str) else held_poses  # AROUND_SEEDS
             held = [] if poses_o is None else off_gallery(poses_o, thetas, "reject_poses")
+            check_reach(seed_angles, thetas, held)
             plans.append((ObjectJob(views, alpha, thetas + held, mask), len(thetas), thetas))
         return plans
 

@@ -37,6 +37,7 @@ __all__ = [
     "check_angles",
     "check_circle_angles",
     "check_labels",
+    "check_reach",
     "check_seed_masks",
     "check_seeds",
     "check_synth",
@@ -296,6 +297,32 @@ def seed_steps(angles: list[float], what: str = "seed_angles") -> list[float]:
             f"synthesize_views), got {angles}"
         )
     return steps
+
+
+def check_reach(seed_angles: list[float], thetas: list[float], held: list[float]) -> None:
+    """Every angle to synthesize within a quarter turn of the seed that synthesizes it: a
+    seed pair makes the angles before it (the first pair) or past it (the last) from its
+    first seed, and only up to 90 degrees from it does that seed see the same side.
+
+    Raises:
+        ValueError: naming ``synth`` or ``reject_poses``, the seeds and how far they reach.
+    """
+    seeds = [a - seed_angles[0] for a in seed_angles]
+    d = 1.0 if seeds[1] > 0 else -1.0  # the direction the seeds go
+    last_first = seeds[-2]  # the end pair's own first seed
+    for name, angles in (("synth", thetas), ("reject_poses", held)):
+        if not angles:
+            continue
+        before = -d * (min(angles) if d > 0 else max(angles))  # before the first seed, from it
+        past = d * ((max(angles) if d > 0 else min(angles)) - last_first)
+        reach = max(before, past)
+        if reach >= 90:
+            raise ValueError(
+                f"{name} asks for views {reach:g} degrees from the seed that would synthesize them, with "
+                f"seeds at {', '.join(f'{a:g}' for a in seed_angles)} degrees; a seed pair synthesizes less "
+                "than 90 degrees from its first seed (beyond, the seeds show the object's other side): "
+                f"narrow {name}, or add seed views nearer the ends"
+            )
 
 
 def block_source(blocks: object) -> Callable[[], Iterable[object]]:

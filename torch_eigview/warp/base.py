@@ -93,8 +93,12 @@ class ViewWarp(torch.nn.Module):
         else:
             theta = as_angle_tensor(thetas, "thetas")
         if bool((theta.abs() >= 90).any()):
+            bad = theta[theta.abs() >= 90].tolist()
+            shown = ", ".join(f"{t:g}" for t in bad[:5]) + (
+                f", ... ({len(bad)} in all)" if len(bad) > 5 else ""
+            )
             raise ValueError(
-                f"thetas must lie within (-90, 90) degrees of the first seed view, got {theta.tolist()}: "
+                f"thetas must lie within (-90, 90) degrees of the first seed view, got {shown}: "
                 "beyond that the seed views show the object's other side"
             )
         return theta
