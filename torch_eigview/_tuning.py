@@ -79,6 +79,11 @@ in its last bits.
   objects falls as 1/n, so the first few objects of a call take most of the gain; eight
   let 20 objects go to two workers as four equal jobs. The objects' views are those of
   each object alone.
+- :data:`GROUP_BYTES`: a job's synthesized views (gallery and held-out, of all its
+  objects) stay within 64 MiB where one object's allow it: with two jobs in flight per
+  worker, a fit's synthesis then holds a few hundred MiB whatever the objects' number, while
+  the flows of a few small objects (COIL's 41 views of 128 × 128, 2.7 MiB each) still go in
+  shared calls. A large object (360 views of 3 × 128 × 128, 70 MiB) gets a job of its own.
 
 Whether another value does better on a given machine is for the benchmarks
 (``benchmarks/bench_*.py`` in the repository) to show; their figures
@@ -92,6 +97,7 @@ __all__ = [
     "COST_CHUNK",
     "COST_CHUNK_CPU",
     "FLOW_BATCH_CPU",
+    "GROUP_BYTES",
     "GROUP_OBJECTS",
     "MARCH_BATCH",
     "PARALLEL_PIXELS",
@@ -120,3 +126,4 @@ PRODUCT_FLOPS = 1e11
 PARALLEL_PIXELS = 5e7
 #: The most objects of one synthesis job of the commands.
 GROUP_OBJECTS = 8
+GROUP_BYTES = 64 << 20

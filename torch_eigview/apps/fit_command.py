@@ -136,6 +136,15 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "angles left out: where the known objects will be seen (default: every 2.5 degrees from 45 before "
         "the first seed to 45 past the last; with --circle the midpoints between gallery views all round)",
     )
+    fit.add_argument(
+        "--max-views",
+        type=bounded_int_arg("--max-views", 1),
+        default=4096,
+        metavar="N",
+        help="the most gallery views held in memory at once: a gallery of at most N is fitted at once "
+        "(its exact eigenspace), a larger one merged block by block, so that memory does not grow "
+        "with the objects",
+    )
     fit.add_argument("--out", required=True, metavar="FILE", help="the model file to write")
     add_quiet(fit)
     add_threads(fit)
@@ -253,6 +262,7 @@ def run_fit(args: argparse.Namespace) -> int:
         reject_poses=AROUND_SEEDS if given is None else given,
         # One thread per CPU, a few objects each (torch's kernels release the GIL); in order.
         workers=object_workers(0, 0, len(objects), kind="thread"),
+        max_views=args.max_views,
     )
     try:
         est.fit(

@@ -87,7 +87,7 @@ class IncrementalEigenspace(FittedEigenspace):
         self._mean: torch.Tensor | None = None  # (N,) float64
         self._basis: torch.Tensor | None = None  # (N, r) in the data's dtype, orthonormal columns
         self._eigvals = torch.zeros(0, dtype=torch.float64)  # (r,) of the scatter
-        self._codes: list[torch.Tensor] = []  # per block (B, r) in the current basis
+        self._codes: list[torch.Tensor] = []  # per block (B, r) in the current basis, the data's dtype
         self._n = 0
         self._total = 0.0  # the trace of the scatter of every view seen
         self._uncentred = 0.0  # ‖X‖², for the rank tolerance of the centring
@@ -201,9 +201,13 @@ class IncrementalEigenspace(FittedEigenspace):
         if self.keep_codes:
             if rot_old is not None and shift is not None:
                 # Old views: x ≈ μ + U a, so a' = U'ᵀ(U a + μ − μ') = (Uᵀ U')ᵀ a − (B/P') U'ᵀ d.
-                self._codes = [a @ rot_old - (b / n_new) * shift for a in self._codes]
+                # One (P, r) product a merge, in the data's dtype: P · r numbers kept, and the
+                # rotations' rounding far below a truncation's.
+                rot, move = rot_old.to(w), ((b / n_new) * shift).to(w)
+                for i, a in enumerate(self._codes):  # a block at a time: one block more held
+                    self._codes[i] = torch.addmm(-move, a, rot)
                 rot_new = rot_new + (n_old / n_new) * shift  # the block: U'ᵀ(x − μ'), μ_b − μ' = (P/P') d
-            self._codes.append(rot_new)
+            self._codes.append(rot_new.to(w))
         self._basis, self._eigvals = new_basis, lam_k
         self._mean = mean_b if self._mean is None else self._mean + (b / n_new) * (mean_b - self._mean)
         self._n = n_new

@@ -394,6 +394,13 @@ class FewViewEigenspace:
         if isinstance(params.synth, Circle) and held_poses is not None:
             circle = Circle(circle.step / 2, circle.overlap)  # the midpoints are held out
         workers = params.workers if objects[0].device.type == "cpu" else 0
+        per_view = objects[0][0].numel() * objects[0].element_size()
+        counts = [
+            len(job.thetas)
+            if job.thetas is not None
+            else job.seeds.shape[0] * len(circle_thetas(job.seeds.shape[0], circle.step, circle.overlap))
+            for job, _, _ in plans
+        ]
         results = object_galleries(
             (job for job, _, _ in plans),
             ticks,
@@ -401,7 +408,7 @@ class FewViewEigenspace:
             circle,
             workers=workers,
             kind=params.worker_kind,
-            group=group_size(len(objects), workers),
+            group=group_size(len(objects), workers, max(counts) * per_view),
         )
         for (_, out), (_, n, thetas), seed_angles, label in zip(results, plans, angles, labels, strict=True):
             for key, value in out.seconds.items():

@@ -220,14 +220,18 @@ def _own_group(outcomes: list[SynthesizedViews | Exception]) -> list[Synthesized
     return [out if isinstance(out, Exception) else own_views(out) for out in outcomes]
 
 
-def group_size(n_objects: int, workers: int) -> int:
+def group_size(n_objects: int, workers: int, object_bytes: int = 0) -> int:
     """Objects per job for ``n_objects`` over ``workers`` (0: this process): as few jobs as
     ``torch_eigview._tuning.GROUP_OBJECTS`` objects a job allow (their flows batched, a
     job's views held until it returns), in a multiple of the workers so that they finish
-    together (20 objects over 2 workers: 4 jobs of 5). The objects' views do not depend
-    on it."""
+    together (20 objects over 2 workers: 4 jobs of 5), and no more objects than keep a job's
+    views, ``object_bytes`` each, within ``torch_eigview._tuning.GROUP_BYTES`` (at least
+    one). The objects' views do not depend on it."""
     slots = max(1, workers)
-    jobs = slots * max(1, math.ceil(n_objects / (slots * _tuning.GROUP_OBJECTS)))
+    per_job = _tuning.GROUP_OBJECTS
+    if object_bytes > 0:
+        per_job = max(1, min(per_job, _tuning.GROUP_BYTES // object_bytes))
+    jobs = slots * max(1, math.ceil(n_objects / (slots * per_job)))
     return max(1, math.ceil(n_objects / jobs))
 
 
