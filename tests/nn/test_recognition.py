@@ -332,10 +332,16 @@ def test_predict_refuses_non_finite_views() -> None:
     assert rec.predict(x[:0]).distances.shape == (0,)
 
 
-def test_predict_unit_norm_overflow_is_an_error() -> None:
+def test_predict_unit_norm_any_scale() -> None:
+    """Views whose L2 norm overflows float32 (1e30 x 1e8 squares) are scaled before the norm:
+    the same answers as the views themselves, not an error and not zeros (issue 41, class 3)."""
     rec = _small_recognizer(unit_norm=True)
-    with pytest.raises(ValueError, match=r"L2 norm overflows torch\.float32"):
-        rec.predict(randn(2, N_FEATURES, seed=4, dtype=torch.float32) * 1e30)
+    x = randn(2, N_FEATURES, seed=4, dtype=torch.float32)
+    ref = rec.predict(x)
+    for scale in (1e-30, 1e30, 3e37):
+        got = rec.predict(x * scale)
+        assert torch.equal(got.labels, ref.labels)
+        torch.testing.assert_close(got.distances, ref.distances, rtol=1e-5, atol=1e-6)
 
 
 def test_predict_damaged_gallery() -> None:

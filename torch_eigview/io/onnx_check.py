@@ -31,7 +31,7 @@ ALLOWED_OPS = frozenset(
     {
         "Abs", "Add", "ArgMin", "Cast", "Clip", "Div", "Exp", "Gather", "GatherND", "Identity",
         "LessOrEqual",
-        "MatMul", "Max", "Min", "Mul", "Neg", "Pow", "ReduceL2", "ReduceMin", "ReduceSum",
+        "MatMul", "Max", "Min", "Mul", "Neg", "Pow", "ReduceL2", "ReduceMax", "ReduceMin", "ReduceSum",
         "ReduceSumSquare", "Reshape", "Sqrt", "Squeeze", "Sub", "Transpose", "Unsqueeze",
     }
 )  # fmt: skip

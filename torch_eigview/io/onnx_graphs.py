@@ -15,6 +15,7 @@ import copy
 import torch
 from torch import nn
 
+from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 from torch_eigview.nn.rejection import rejection_score
@@ -45,8 +46,10 @@ def projection_module(module: nn.Module, fold: bool, dtype: torch.dtype) -> nn.M
 class FoldedProjection(nn.Module):
     """An :class:`EigenProjection` as one MatMul: ``z = x @ Wᵀ − b`` with ``b = mean @ Wᵀ``.
 
-    With ``unit_norm`` the scale moves past the product: ``(x/|x|) @ Wᵀ = (x @ Wᵀ)/|x|``,
-    a (B, k) division instead of a (B, N) one. Same map as the projection, up to rounding.
+    With ``unit_norm`` the view is divided by its largest magnitude first (so that its
+    squares neither overflow nor underflow at any scale, as :func:`~torch_eigview.nn.unit_rows`
+    does) and the norm moves past the product: ``(v/|v|) @ Wᵀ = (v @ Wᵀ)/|v|``. Same map as
+    the projection, up to rounding.
     Takes (B, C, H, W) images only (the exported graph's input).
 
     Args:
@@ -80,14 +83,16 @@ class FoldedProjection(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(B, C, H, W) images → (B, k) coefficients."""
+        if not self.unit_norm:
+            return x.flatten(1) @ self.weight_t - self.bias
+        tiny = torch.finfo(x.dtype).tiny
+        x = x / x.flatten(1).abs().amax(dim=1).clamp_min(tiny).view(-1, 1, 1, 1)
         z = x.flatten(1) @ self.weight_t
-        if self.unit_norm:
-            # Two-stage sum of squares (rows, then the rest): onnxruntime's ReduceL2 sums the
-            # N = C*H*W squares in one float32 run, 5e-5 off on 128x128 images; summing W,
-            # then C*H values keeps the error near (W + C*H) eps, as good as torch's.
-            sq = x.square().sum(dim=-1).flatten(1).sum(dim=1, keepdim=True)
-            z = z / sq.sqrt().clamp_min(torch.finfo(x.dtype).tiny)
-        return z - self.bias
+        # Two-stage sum of squares (rows, then the rest): onnxruntime's ReduceL2 sums the
+        # N = C*H*W squares in one float32 run, 5e-5 off on 128x128 images; summing W,
+        # then C*H values keeps the error near (W + C*H) eps, as good as torch's.
+        sq = x.square().sum(dim=-1).flatten(1).sum(dim=1, keepdim=True)
+        return z / sq.sqrt().clamp_min(tiny) - self.bias
 
 
 class ExportedRecognizer(nn.Module):
@@ -153,9 +158,8 @@ class ExportedRecognizer(nn.Module):
 
     def _dffs(self, x: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         flat = x.flatten(1)
+        if self.unit_norm:  # the unit vector, scaled first as the projection's
+            flat = unit_rows(flat)
         dot = flat @ self.mean
         sq = flat.square().sum(dim=1)
-        if self.unit_norm:
-            norm = sq.sqrt().clamp_min(torch.finfo(x.dtype).tiny)
-            dot, sq = dot / norm, sq / norm.square()
         return (sq - 2 * dot + self.mean_sqnorm - z.square().sum(dim=1)).clamp_min(0).sqrt()

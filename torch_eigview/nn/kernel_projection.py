@@ -32,6 +32,7 @@ from torch_eigview.nn._frozen import (
     check_sizes,
     is_size,
 )
+from torch_eigview.nn.functional import unit_rows
 
 __all__ = ["KERNELS", "KernelProjection", "pairwise_kernel"]
 
@@ -67,9 +68,9 @@ def pairwise_kernel(
         y_sqnorm = y.square().sum(dim=1)
     tiny = torch.finfo(x.dtype).tiny
     if kernel == "cosine":
-        # Zero rows give zero similarity, as sklearn's ``normalize`` leaves them at zero.
-        x_norm = x.norm(dim=1, keepdim=True).clamp_min(tiny)
-        return (x / x_norm) @ (y / y_sqnorm.sqrt().clamp_min(tiny)[:, None]).T
+        # Zero rows give zero similarity, as sklearn's ``normalize`` leaves them at zero;
+        # x is scaled before its norm is taken (unit_rows), so no scale overflows.
+        return unit_rows(x) @ (y / y_sqnorm.sqrt().clamp_min(tiny)[:, None]).T
     # rbf: ‖x − y‖² expanded as ‖x‖² − 2 x·y + ‖y‖² (one matrix product, as sklearn's
     # ``euclidean_distances``), clamped at 0 against rounding.
     sq = x.square().sum(dim=1, keepdim=True) - 2 * (x @ y.T) + y_sqnorm

@@ -269,7 +269,7 @@ class NearestNeighborRecognizer(nn.Module):
         Raises:
             TypeError: ``x`` is not a float tensor (or not of the layer's dtype), or
                 ``interpolate_pose`` or ``reject`` is not a bool.
-            ValueError: a bad shape, NaN or infinite values, norms that overflow,
+            ValueError: a bad shape, NaN or infinite values,
                 non-finite distances (a damaged gallery), or ``reject`` without thresholds.
         """
         for flag, name in ((interpolate_pose, "interpolate_pose"), (reject, "reject")):
@@ -281,13 +281,6 @@ class NearestNeighborRecognizer(nn.Module):
         check_ndim(x, "x", (2, 4), "(B, N) or (B, C, H, W)")
         if x.numel() and not bool(torch.isfinite(x.sum())):
             check_finite(x, "x")  # names the NaN or infinite values; else only the sum overflowed
-        if getattr(self.projection, "unit_norm", False) and x.numel():
-            norms = torch.linalg.vector_norm(x.flatten(1), dim=1)
-            if not bool(torch.isfinite(norms).all()):
-                raise ValueError(
-                    f"x has views whose L2 norm overflows {x.dtype} (largest magnitude "
-                    f"{float(x.abs().max()):.3g}): a unit-norm projection would give zeros; rescale the views"
-                )
         # A non-finite gallery point would win every search at distance 0 (-inf clamped):
         # (G, k) values, checked per call, cheap next to the projection.
         if not (bool(torch.isfinite(self.codes).all()) and bool(torch.isfinite(self.codes_sqnorm).all())):
