@@ -59,14 +59,14 @@ ALLOWED: dict[str, set[str]] = {
 
 def _unit(module: str) -> str:
     """'torch_eigview.warp.operator' -> 'warp'; errors, check, lazy, files, environment,
-    config and _tuning are the base layer. ``_tuning`` is private to the package, not to a subpackage:
+    config, parse and _tuning are the base layer. ``_tuning`` is private to the package, not to a subpackage:
     every layer imports it as a module (``import torch_eigview._tuning as _tuning``) and
     reads its values at call time, so that a test can patch them."""
     parts = module.split(".")
     if len(parts) == 1:
         return "root"
     head = parts[1]
-    if head in ("errors", "check", "lazy", "files", "environment", "config", "_tuning"):
+    if head in ("errors", "check", "lazy", "files", "environment", "config", "parse", "_tuning"):
         return "base"
     if head in ("__init__", "__main__"):
         return "root"

@@ -116,7 +116,7 @@ COIL = [
         "95",
         match=r"elevation=95\.0 must be an angle in degrees in \(-90, 90\)",
     ),
-    _coil("elevation-nan", *A, "--elevation", "nan", match=r"elevation=nan must be an angle"),
+    _coil("elevation-nan", *A, "--elevation", "nan", match=r"--elevation must be .auto. or a finite number of degrees, got .nan."),
     _coil("objects-0", *A, "--objects", "0", match=r"--objects: .*must hold positive object ids, got 0"),
     _coil("objects-reversed", *A, "--objects", "5-3", match=r"--objects: .*holds the reversed range 5-3"),
     _coil("objects-text", *A, "--objects", "abc", match=r"--objects: .*'abc' must look like '1-20'"),

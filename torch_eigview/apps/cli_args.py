@@ -13,6 +13,8 @@ from collections.abc import Callable, Iterable
 from functools import partial
 from typing import TypeVar
 
+from torch_eigview.parse import parse_float, parse_int
+
 __all__ = [
     "MIN_OPSET",
     "HelpFormatter",
@@ -57,7 +59,7 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 def components_arg(text: str) -> int | float:
     try:
-        value = float(text)
+        value = parse_float(text, "--components")
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--components must be an int or a fraction in (0, 1), got {text!r}"
@@ -72,13 +74,16 @@ def components_arg(text: str) -> int | float:
 
 
 def word_or_float(text: str, word: str, message: str) -> float | str:
-    """``word`` itself, or ``text`` as a float; ``message`` is the argparse error otherwise."""
+    """``word`` itself, or ``text`` as a finite float; ``message`` is the argparse error otherwise."""
     if text == word:
         return text
     try:
-        return float(text)
+        value = parse_float(text, word)
     except ValueError:
-        raise argparse.ArgumentTypeError(message) from None
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(message)
+    return value
 
 
 def finite_arg(flag: str) -> Callable[[str], float]:
@@ -86,7 +91,7 @@ def finite_arg(flag: str) -> Callable[[str], float]:
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
+            value = parse_float(text, flag)
         except ValueError:
             value = math.nan
         if not math.isfinite(value):
@@ -110,7 +115,7 @@ def bounded_int_arg(flag: str, minimum: int, limit: str | None = None) -> Callab
 
     def parse(text: str) -> int:
         try:
-            value = int(text)
+            value = parse_int(text, flag)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{flag} must be an integer, got {text!r}") from None
         if value < minimum:
@@ -141,7 +146,9 @@ def opset_arg(text: str) -> int:
 
 
 def elevation_arg(text: str) -> float | str:
-    return word_or_float(text, "auto", f"--elevation must be 'auto' or degrees, got {text!r}")
+    return word_or_float(
+        text, "auto", f"--elevation must be 'auto' or a finite number of degrees, got {text!r}"
+    )
 
 
 def objects_arg(text: str) -> list[int]:
@@ -166,7 +173,7 @@ def add_quiet(parser: argparse.ArgumentParser) -> None:
 def _int_at_least(text: str, minimum: int) -> int | None:
     """``text`` as an int >= ``minimum``, or None."""
     try:
-        value = int(text)
+        value = parse_int(text, "")
     except ValueError:
         return None
     return value if value >= minimum else None

@@ -45,6 +45,7 @@ from torch_eigview.apps.view_options import (
     resolve_background,
 )
 from torch_eigview.files import check_outputs
+from torch_eigview.parse import parse_float
 
 if TYPE_CHECKING:
     import torch
@@ -153,7 +154,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def _rate_arg(text: str) -> float:
     """``--reject-rate R``: a number in (0, 1) (argparse type)."""
     try:
-        value = float(text)
+        value = parse_float(text, "--reject-rate")
     except ValueError:
         value = math.nan
     if not 0.0 < value < 1.0:

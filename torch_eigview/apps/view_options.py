@@ -15,6 +15,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from torch_eigview.apps.cli_args import finite_arg
+from torch_eigview.parse import parse_float
 
 if TYPE_CHECKING:
     from torch_eigview.datasets.manifest import ViewManifest
@@ -52,7 +53,7 @@ def background_arg(text: str) -> str | tuple[float, ...]:
         return text
     parts = text.split(",")
     try:
-        values = [float(p) for p in parts]
+        values = [parse_float(p.strip(), "--background") for p in parts]
     except ValueError:
         values = []
     if len(values) not in (1, 3) or not all(math.isfinite(v) and 0.0 <= v <= 255.0 for v in values):

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from torch_eigview.datasets.coil import CoilFolder
 from torch_eigview.io.images import check_regular_file
+from torch_eigview.parse import parse_float
 
 __all__ = ["ViewEntry", "ViewManifest"]
 
@@ -64,9 +65,12 @@ class ViewEntry:
 def _angle(text: str, column: str, where: str, lo: float | None = None, hi: float | None = None) -> float:
     """A finite angle in degrees parsed from ``text``; a ValueError naming ``where`` otherwise."""
     try:
-        value = float(text)
+        # Strictly decimal: float() would read "1_0" as 10 and "١٠" as 10, both more likely typos.
+        value = parse_float(text.strip(), column)
     except ValueError:
-        raise ValueError(f"{where}: {column}={text!r} must be a number of degrees") from None
+        raise ValueError(
+            f"{where}: {column}={text!r} must be a number of degrees in decimal digits (such as 10 or -2.5)"
+        ) from None
     if not math.isfinite(value):
         raise ValueError(f"{where}: {column}={text!r} must be a finite number of degrees")
     lo, hi = (-_MAX_ANGLE, _MAX_ANGLE) if lo is None or hi is None else (lo, hi)

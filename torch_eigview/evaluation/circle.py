@@ -79,7 +79,7 @@ def circle_layout(
         ValueError: M below 2 or above the number of poses; a seed pose that is not an
             available pose (the message lists them); M = 2 with ``nvs`` (seeds 180° apart,
             where Eq. 7's sin α is zero); a dense step that is not a positive multiple of
-            the poses' step.
+            the poses' step; real views at every available pose (none left to test).
 
     Example:
         >>> layout = circle_layout([5.0 * i for i in range(72)], 0.0, 8, "nvs")
@@ -120,4 +120,14 @@ def circle_layout(
         if off:
             raise ValueError(f"{names[1]}={step:g} needs poses {off} missing from {_pose_list(grid)}")
     tests = [p for p in grid if not _on_grid(p, real)]
+    if not tests:
+        fewer = (
+            f"give fewer seed views ({names[0]} at most {len(grid) // 2})"
+            if method != "dense"
+            else f"give fewer seed views, or a {names[1]} over {step:g}"
+        )
+        raise ValueError(
+            f"{names[0]}={m} with method {method!r} puts real gallery views at every one of the "
+            f"{len(grid)} available poses, leaving none to test: {fewer}"
+        )
     return CircleLayout(seed_poses, alpha, real, tests)
