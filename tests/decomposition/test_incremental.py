@@ -80,3 +80,43 @@ def test_errors_name_the_argument() -> None:
         IncrementalEigenspace(2).fit([])
     with pytest.raises(ValueError, match=r"must be finite|NaN"):
         IncrementalEigenspace(2).partial_fit(torch.full((3, 4), float("nan")))
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("parts", [2, 3])
+def test_merged_models_equal_one_model_of_every_view(dtype: torch.dtype, parts: int) -> None:
+    """Models fitted apart (the ranks of a process group) and merged in order give the
+    eigenvalues, components and every view's codes of one model fitted on all the views,
+    and of the exact eigenspace, below the rank cap."""
+    x = _views(dtype=dtype)
+    exact = Eigenspace(10).fit(x)
+    pieces = [IncrementalEigenspace(10, max_rank=256, keep_codes=True) for _ in range(parts)]
+    for piece, chunk in zip(pieces, x.tensor_split(parts), strict=True):
+        for block in chunk.split(41):  # each piece merged block by block, as a rank does
+            piece.partial_fit(block)
+    merged = IncrementalEigenspace(10, max_rank=256, keep_codes=True)
+    for piece in pieces:
+        merged.merge(piece)
+    tol = {"rtol": 1e-4, "atol": 1e-5} if dtype == torch.float32 else {"rtol": 1e-9, "atol": 1e-10}
+    torch.testing.assert_close(merged.eigenvalues_, exact.eigenvalues_, **tol)
+    torch.testing.assert_close(merged.mean_, exact.mean_, **tol)
+    torch.testing.assert_close(merged.components_, exact.components_, **tol)
+    # float32: one rotation more than a block merge's, each rounding at the data's eps.
+    code_tol = {"rtol": 0.0, "atol": 3e-4} if dtype == torch.float32 else tol
+    torch.testing.assert_close(merged.codes_, exact.transform(x), **code_tol)
+    assert merged.n_samples_seen_ == x.shape[0] and merged.truncation_bound_ == 0.0
+
+
+def test_merge_errors_name_the_argument() -> None:
+    x = _views(1)[:20]
+    model = IncrementalEigenspace(3, keep_codes=True).fit(x)
+    with pytest.raises(TypeError, match="other must be an IncrementalEigenspace, got Tensor"):
+        model.merge(x)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="other must be fitted"):
+        model.merge(IncrementalEigenspace(3))
+    with pytest.raises(ValueError, match="other must keep its codes"):
+        model.merge(IncrementalEigenspace(3).fit(x))
+    with pytest.raises(
+        ValueError, match=r"other must hold views of N=256 values of torch\.float64, got N=100"
+    ):
+        model.merge(IncrementalEigenspace(3, keep_codes=True).fit(x[:, :100]))

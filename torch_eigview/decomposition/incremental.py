@@ -79,6 +79,17 @@ class IncrementalEigenspace(FittedEigenspace):
         self.max_rank = max_rank
         self.keep_codes = keep_codes
 
+    def _validate_params(self) -> None:
+        """Checks the arguments, stored as given (scikit-learn's habit); every merge calls it."""
+        super()._validate_params()
+        max_rank = check_int(self.max_rank, "max_rank", minimum=1)
+        if isinstance(self.n_components, int) and self.n_components > max_rank:
+            raise ValueError(f"max_rank={max_rank} must be at least n_components={self.n_components}")
+        if not isinstance(self.keep_codes, bool):
+            raise TypeError(
+                f"keep_codes must be a bool, got {type(self.keep_codes).__name__} {self.keep_codes!r}"
+            )
+
     def __repr__(self) -> str:
         return f"IncrementalEigenspace(n_components={self.n_components!r}, max_rank={self.max_rank!r})"
 
@@ -109,9 +120,7 @@ class IncrementalEigenspace(FittedEigenspace):
             TypeError, ValueError: a bad ``n_components``, ``max_rank`` or block; the
                 message names it.
         """
-        max_rank = check_int(self.max_rank, "max_rank", minimum=1)
-        if isinstance(self.n_components, int) and self.n_components > max_rank:
-            raise ValueError(f"max_rank={max_rank} must be at least n_components={self.n_components}")
+        self._validate_params()
         if not hasattr(self, "_n"):
             self._reset()
         x, shape = blocks_of_views(X, self._shape, self._dtype)
@@ -121,7 +130,7 @@ class IncrementalEigenspace(FittedEigenspace):
             )
         self._shape, self._dtype = shape, x.dtype
         with torch.no_grad():
-            self._merge(x, max_rank)
+            self._merge(x, int(self.max_rank))
         self._stale = True  # the record is made when first read (a merge may leave rank 0)
         return self
 
@@ -139,11 +148,102 @@ class IncrementalEigenspace(FittedEigenspace):
         products of size N run in it (float32 data: the speed of a float32 GEMM, rounding
         far below a truncation's), the small matrices, the mean and the eigenproblem in
         float64."""
-        b, w = x.shape[0], x.dtype
         mean_b = x.mean(0, dtype=torch.float64)
-        xc = x - mean_b.to(w)
+        xc = x - mean_b.to(x.dtype)
         gram = (xc @ xc.T).double()  # (B, B)
         self._uncentred += float(x.square().sum(dtype=torch.float64))
+        rot_new, shift, n_old, n_new = self._merge_rows(
+            xc, mean_b, x.shape[0], gram, float(gram.diagonal().sum()), max_rank
+        )
+        if self.keep_codes:
+            # The block: U'ᵀ(x − μ') = Xc U' + U'ᵀ(μ_b − μ'), μ_b − μ' = (P/P') d.
+            self._codes.append((rot_new if shift is None else rot_new + (n_old / n_new) * shift).to(x.dtype))
+
+    def merge(self, other: IncrementalEigenspace) -> IncrementalEigenspace:
+        """Merges the model of other views into this one (Hall, Marshall and Martin's merge
+        of two eigenspace models): the result is the model of both sets of views, exact
+        below ``max_rank`` as a block merge is. ``other``'s rows enter as
+        ``diag(√s_o) U_oᵀ``, whose scatter is ``other``'s; with ``keep_codes`` its views'
+        coordinates follow, after this model's own. This is how models fitted apart (on
+        the ranks of a process group, say) become one.
+
+        Args:
+            other: a fitted ``IncrementalEigenspace`` of views of the same size and dtype
+                (with ``keep_codes`` when this one keeps codes).
+
+        Returns:
+            self.
+
+        Raises:
+            TypeError, ValueError: ``other`` is not a fitted model of the same size and dtype.
+        """
+        if not isinstance(other, IncrementalEigenspace):
+            raise TypeError(f"other must be an IncrementalEigenspace, got {type(other).__name__}")
+        if getattr(other, "_n", 0) == 0 or other._basis is None or other._mean is None:
+            raise ValueError("other must be fitted (partial_fit or fit) before it is merged")
+        if self.keep_codes and not other.keep_codes:
+            raise ValueError(
+                "other must keep its codes (keep_codes=True) to be merged into a model that keeps codes"
+            )
+        max_rank = check_int(self.max_rank, "max_rank", minimum=1)
+        if not hasattr(self, "_n") or self._n == 0:
+            self._reset()
+            self._copy_state(other)
+            return self
+        assert self._mean is not None and self._basis is not None
+        if other._mean.shape != self._mean.shape or other._dtype != self._dtype:
+            raise ValueError(
+                f"other must hold views of N={self._mean.shape[0]} values of {self._dtype}, got "
+                f"N={other._mean.shape[0]} of {other._dtype}"
+            )
+        w = other._basis.dtype
+        rows = (other._eigvals.clamp_min(0).sqrt()[:, None] * other._basis.T.double()).to(w)  # (r_o, N)
+        self._uncentred += other._uncentred
+        self.truncation_bound_ += other.truncation_bound_
+        self._dropped += other._dropped
+        codes = list(other._codes) if self.keep_codes else []
+        basis_o = other._basis
+        with torch.no_grad():
+            _, shift, n_old, n_new = self._merge_rows(
+                rows, other._mean, other._n, torch.diag(other._eigvals), other._total, max_rank
+            )
+            if self.keep_codes:
+                assert self._basis is not None and shift is not None
+                turn = basis_o.T @ self._basis  # (r_o, r'): U_oᵀ U'
+                move = ((n_old / n_new) * shift).to(w)
+                self._codes += [torch.addmm(move, a, turn) for a in codes]
+        self._stale = True
+        return self
+
+    def _copy_state(self, other: IncrementalEigenspace) -> None:
+        assert other._mean is not None and other._basis is not None
+        self._mean, self._basis, self._eigvals = (
+            other._mean.clone(),
+            other._basis.clone(),
+            other._eigvals.clone(),
+        )
+        self._codes = [c.clone() for c in other._codes] if self.keep_codes else []
+        self._n, self._total, self._uncentred = other._n, other._total, other._uncentred
+        self.truncation_bound_, self._dropped = other.truncation_bound_, other._dropped
+        self._shape, self._dtype = other._shape, other._dtype
+        self._stale = True
+
+    def _merge_rows(
+        self,
+        xc: torch.Tensor,
+        mean_b: torch.Tensor,
+        b: int,
+        gram: torch.Tensor,
+        block_total: float,
+        max_rank: int,
+    ) -> tuple[torch.Tensor, torch.Tensor | None, int, int]:
+        """Merges rows ``xc`` (R, N) whose scatter ``xcᵀ xc`` is that of ``b`` views of mean
+        ``mean_b`` (a block's centred views, R = b; or a model's ``diag(√s) Uᵀ``), ``gram``
+        their (R, R) ``xc xcᵀ`` in float64 and ``block_total`` their scatter's trace. The
+        earlier views' codes are rotated here; returns ``(Xc U', U'ᵀ d or None, P, P')`` for
+        the caller to place the new views' codes."""
+        w = xc.dtype
+        rows = xc.shape[0]
         if self._mean is None or self._basis is None:
             k_small = gram
             n_old, root, weight = 0, torch.zeros(0, dtype=torch.float64), 0.0
@@ -156,24 +256,24 @@ class IncrementalEigenspace(FittedEigenspace):
             weight = math.sqrt(n_old * b / (n_old + b))
             c = (weight * (mean_b - self._mean)).to(w)
             root = s.clamp_min(0).sqrt()
-            p = (basis.T @ xc.T).double()  # (r, B)
+            p = (basis.T @ xc.T).double()  # (r, R)
             u_c = (basis.T @ c).double()  # (r,)
-            g = (xc @ c).double()  # (B,)
+            g = (xc @ c).double()  # (R,)
             cc = float(c.double() @ c.double())
-            k_mat = torch.zeros(r + b + 1, r + b + 1, dtype=torch.float64)
+            k_mat = torch.zeros(r + rows + 1, r + rows + 1, dtype=torch.float64)
             k_mat[:r, :r] = torch.diag(s)
-            k_mat[:r, r : r + b] = root[:, None] * p
+            k_mat[:r, r : r + rows] = root[:, None] * p
             k_mat[:r, -1] = root * u_c
-            k_mat[r : r + b, r : r + b] = gram
-            k_mat[r : r + b, -1] = g
+            k_mat[r : r + rows, r : r + rows] = gram
+            k_mat[r : r + rows, -1] = g
             k_mat[-1, -1] = cc
             k_small = k_mat.triu() + torch.triu(k_mat, 1).T
         lam, vec = torch.linalg.eigh(k_small)
         lam, vec = lam.flip(0), vec.flip(1)
         n_new = n_old + b
-        self._total += float(gram.diagonal().sum()) + cc
+        self._total += block_total + cc
         dtype = self._dtype or torch.float64
-        rank = numerical_rank(lam, n_new, x.shape[1], dtype, self._uncentred)
+        rank = numerical_rank(lam, n_new, xc.shape[1], dtype, self._uncentred)
         keep = min(max_rank, rank)
         keep_vec = vec[:, :keep]  # none for identical views so far: nothing to span yet
         if rank > keep:  # the cap, not rounding, drops eigenpairs: Weyl's bound grows
@@ -182,35 +282,31 @@ class IncrementalEigenspace(FittedEigenspace):
         lam_k = lam[:keep]
         inv = lam_k.rsqrt() if keep else lam_k
         # U' = M V Λ^(-1/2), M = [U diag(√s), Xcᵀ, c] (the first block: M = Xcᵀ).
+        shift = None
         if self._basis is None:
             new_basis = (xc.T @ keep_vec.to(w)) * inv.to(w)
-            rot_new = (gram @ keep_vec) * inv  # (B, r'): the block's own coordinates
-            rot_old = None
-            shift = None
+            rot_new = (gram @ keep_vec) * inv  # (R, r'): the rows' own coordinates
         else:
             assert p is not None and u_c is not None and g is not None and c is not None
-            v_old, v_blk, v_c = keep_vec[:r], keep_vec[r : r + b], keep_vec[r + b]
+            v_old, v_blk, v_c = keep_vec[:r], keep_vec[r : r + rows], keep_vec[r + rows]
             new_basis = (
                 self._basis @ (root[:, None] * v_old).to(w) + xc.T @ v_blk.to(w) + c[:, None] * v_c.to(w)
             ) * inv.to(w)
             # Uᵀ-free rotations: U'ᵀ U, U'ᵀ d and U'ᵀ Xcᵀ from the small matrices alone.
             rot_old = (v_old * root[:, None] + p @ v_blk + u_c[:, None] * v_c) * inv  # (r, r'): Uᵀ U'
-            t = ((root * u_c) @ v_old + g @ v_blk + cc * v_c) * inv / weight  # (r',): U'ᵀ d
-            shift = t
-            rot_new = ((p.T * root) @ v_old + gram @ v_blk + g[:, None] * v_c) * inv  # (B, r'): Xc U'
-        if self.keep_codes:
-            if rot_old is not None and shift is not None:
+            shift = ((root * u_c) @ v_old + g @ v_blk + cc * v_c) * inv / weight  # (r',): U'ᵀ d
+            rot_new = ((p.T * root) @ v_old + gram @ v_blk + g[:, None] * v_c) * inv  # (R, r'): Xc U'
+            if self.keep_codes:
                 # Old views: x ≈ μ + U a, so a' = U'ᵀ(U a + μ − μ') = (Uᵀ U')ᵀ a − (B/P') U'ᵀ d.
                 # One (P, r) product a merge, in the data's dtype: P · r numbers kept, and the
                 # rotations' rounding far below a truncation's.
                 rot, move = rot_old.to(w), ((b / n_new) * shift).to(w)
                 for i, a in enumerate(self._codes):  # a block at a time: one block more held
                     self._codes[i] = torch.addmm(-move, a, rot)
-                rot_new = rot_new + (n_old / n_new) * shift  # the block: U'ᵀ(x − μ'), μ_b − μ' = (P/P') d
-            self._codes.append(rot_new.to(w))
         self._basis, self._eigvals = new_basis, lam_k
         self._mean = mean_b if self._mean is None else self._mean + (b / n_new) * (mean_b - self._mean)
         self._n = n_new
+        return rot_new, shift, n_old, n_new
 
     def _record(self) -> EigenFit:
         assert self._mean is not None and self._basis is not None and self._dtype is not None
@@ -265,6 +361,7 @@ class IncrementalEigenspace(FittedEigenspace):
         Raises:
             ValueError: no view.
         """
+        self._validate_params()
         self._reset()
         self._state = None
         if isinstance(X, torch.Tensor):
