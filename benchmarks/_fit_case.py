@@ -138,7 +138,7 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
     after_imports = _rss_bytes()
     warm = torch.cat([smooth_views(o, 41, ch, 16) for o in range(2)])  # loads BLAS, LAPACK, pools
     Eigenspace(5).fit(warm)
-    StreamingEigenspace(5, method="randomized").fit(warm)
+    StreamingEigenspace(5, solver="randomized").fit(warm)
     del warm
     passes, n_threads = 1, torch.get_num_threads()
     extra: dict[str, Any] = {}
@@ -163,16 +163,16 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
                 extra["synthesis_s"] = time.perf_counter() - t0
                 with for_products(flops) as n_threads:
                     space = StreamingEigenspace(k, max_views=spec["max_views"]).fit(cache)
-                extra["method"] = space.method_
+                extra["method"] = space.solver_
                 passes = space.n_passes_
         elif kind == "explicit":
             with for_products(flops) as n_threads:
                 Eigenspace(k).fit(torch.cat(list(source())))
         else:
             with for_products(flops) as n_threads:
-                space = StreamingEigenspace(k, method=kind, max_views=spec["max_views"]).fit(source)
+                space = StreamingEigenspace(k, solver=kind, max_views=spec["max_views"]).fit(source)
             passes = space.n_passes_
-            extra["method"] = space.method_
+            extra["method"] = space.solver_
         seconds = time.perf_counter() - t0
     return {
         **spec,

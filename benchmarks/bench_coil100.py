@@ -8,7 +8,7 @@ On random smooth views (two seeds 5 px apart per object), each case in a fresh p
   exact (Gram by panels of 1025 views; the reference of the ratios), subspace and
   randomized;
 - the whole build: per object the flow and 41 synthesized views into a
-  :class:`~torch_eigview.scale.ViewCache`, then ``StreamingEigenspace``'s default method
+  :class:`~torch_eigview.scale.ViewCache`, then ``StreamingEigenspace``'s default solver
   from it; in one process on torch's threads (the reference of the ratios), over one
   worker process per CPU and over one worker thread per CPU (the commands' default).
 

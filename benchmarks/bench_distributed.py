@@ -108,7 +108,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any] | None:
         t1 = time.perf_counter()
         if backend == "nccl":
             views = views.cuda()
-        space = fit_distributed(views, args.components, method=args.method)
+        space = fit_distributed(views, args.components, solver=args.method)
         t2 = time.perf_counter()
         if rank != 0:
             return None
@@ -140,7 +140,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any] | None:
             raw={"quick": args.quick, **summary},
         )
         if args.save:
-            save_state_dict(args.save, space.to_module().cpu().state_dict())
+            save_state_dict(space.to_module().cpu().state_dict(), args.save)
         return summary
     finally:
         dist.destroy_process_group()

@@ -60,7 +60,7 @@ def make_projection(k: int, seed: int = 0) -> EigenProjection:
     n = int(np.prod(IMAGE_SHAPE))
     basis, _ = torch.linalg.qr(torch.randn(n, k, generator=gen, dtype=torch.float64))
     mean = torch.rand(n, generator=gen, dtype=torch.float64)
-    return EigenProjection(mean.float(), basis.T.contiguous().float(), image_shape=IMAGE_SHAPE)
+    return EigenProjection.from_tensors(mean.float(), basis.T.contiguous().float(), image_shape=IMAGE_SHAPE)
 
 
 def sklearn_pca(projection: EigenProjection) -> Any:

@@ -38,7 +38,7 @@ def main() -> None:
         info = export_projection(recognizer.projection, args.out, opset_version=args.opset)
     gen = torch.Generator().manual_seed(0)
     images = torch.cat([torch.rand(b, *info.image_shape, generator=gen) for b in (1, 7, 32)])
-    report = compare_with_eager(args.out, model, images)
+    report = compare_with_eager(model, args.out, images)
     print(f"wrote {args.out}: {info}")
     print("onnxruntime vs eager: " + ", ".join(f"{k} {v:.3g}" for k, v in report.items()))
 

@@ -73,7 +73,7 @@ def test_compare_names_the_onnx_extra(
 ) -> None:
     missing(monkeypatch, "onnxruntime")
     with pytest.raises(ImportError, match=rf"compare_with_eager needs onnxruntime, .*{ONNX}"):
-        compare_with_eager("p.onnx", recognizer, rand(2, *IMAGE_SHAPE, dtype=torch.float32))
+        compare_with_eager(recognizer, "p.onnx", rand(2, *IMAGE_SHAPE, dtype=torch.float32))
 
 
 def test_commands_name_the_onnx_extra(
@@ -83,7 +83,7 @@ def test_commands_name_the_onnx_extra(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     model = tmp_path / "model.pt"
-    save_recognizer(model, recognizer)
+    save_recognizer(recognizer, model)
     missing(monkeypatch, "onnx", "onnxruntime", "onnxscript")
     for argv, needs in (
         (["export", "--model", str(model), "--out", str(tmp_path / "r.onnx")], "ONNX export needs onnx,"),

@@ -62,7 +62,7 @@ limit = os.path.getsize(model) // 2
 resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
 out = {}
 try:
-    save_recognizer(model, make_recognizer(unit_norm=False))
+    save_recognizer(make_recognizer(unit_norm=False), model)
 except OSError as exc:
     out["save"] = str(exc)
 try:
@@ -92,7 +92,7 @@ print(json.dumps(out))
 def test_partial_writes_under_a_file_size_limit(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     """RLIMIT_FSIZE below the model's size: every write fails part-way and loses nothing."""
     model = tmp_path / "model.pt"
-    save_recognizer(model, make_recognizer(), {"run": 1})
+    save_recognizer(make_recognizer(), model, {"run": 1})
     before = _state(model)
     proc = _child(_UNDER_LIMIT, str(tmp_path))
     stdout, _ = proc.communicate(timeout=300)
@@ -128,7 +128,7 @@ with atomic_output(folder + "/model.pt") as tmp:
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_killed_writer_leaves_nothing_a_later_run_trips_over(tmp_path: Path, sig: signal.Signals) -> None:
     model = tmp_path / "model.pt"
-    save_recognizer(model, make_recognizer())
+    save_recognizer(make_recognizer(), model)
     before = _state(model)
     proc = _child(_KILLED_WRITER, str(tmp_path))
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
@@ -141,7 +141,7 @@ def test_killed_writer_leaves_nothing_a_later_run_trips_over(tmp_path: Path, sig
         assert sorted(os.listdir(tmp_path)) == sorted(["model.pt", os.path.basename(cache.path)])
         assert [b.shape[0] for b in cache()] == [2]
     assert _same(_state(model), before)
-    save_recognizer(model, make_recognizer(unit_norm=False))  # and writing there works again
+    save_recognizer(make_recognizer(unit_norm=False), model)  # and writing there works again
     assert os.listdir(tmp_path) == ["model.pt"]
 
 
@@ -167,7 +167,7 @@ def test_bit_flips_in_an_onnx_file_are_refused(tmp_path: Path, capsys: pytest.Ca
     info = export_recognizer(rec, path)
     assert read_metadata(path) == info
     x = torch.rand(4, *info.image_shape, generator=torch.Generator().manual_seed(0))
-    assert compare_with_eager(path, rec, x)["label_agreement"] == 1.0
+    assert compare_with_eager(rec, path, x)["label_agreement"] == 1.0
     for data in _flip_bits(path, 20, seed=7):
         bad = tmp_path / "bad.onnx"
         bad.write_bytes(data)
@@ -187,7 +187,7 @@ def _exit(argv: list[str]) -> int:
 
 def test_export_refuses_a_corrupted_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = tmp_path / "model.pt"
-    save_recognizer(model, make_recognizer())
+    save_recognizer(make_recognizer(), model)
     payload = torch.load(model, weights_only=True)
     payload["components"][0, 0] *= -1e30  # what one exponent flip does
     torch.save(payload, model)
@@ -231,7 +231,7 @@ def test_bad_output_path_is_refused_before_any_work(
 
 def test_output_equal_to_an_input_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = tmp_path / "model.pt"
-    save_recognizer(model, make_recognizer())
+    save_recognizer(make_recognizer(), model)
     before = model.read_bytes()
     assert _exit(["export", "--model", str(model), "--out", str(model)]) == 2
     assert "is the same file as --model" in capsys.readouterr().err

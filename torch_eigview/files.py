@@ -54,6 +54,7 @@ __all__ = [
     "check_outputs",
     "remove_stale",
     "scratch_file",
+    "write_error",
     "write_json",
 ]
 
@@ -216,6 +217,24 @@ def _fsync_folder(folder: str) -> None:
             os.close(fd)
 
 
+def write_error(path: PathLike, cause: BaseException) -> OSError:
+    """The error of a failed write of ``path``: "could not write 'PATH' (REASON); any previous
+    file is unchanged", with the errno of the first ``OSError`` in ``cause``'s chain (a
+    writer such as ``torch.save`` reports a failed ``write`` as its own ``RuntimeError``,
+    the ``OSError`` as its context)."""
+    seen: set[int] = set()
+    link: BaseException | None = cause
+    while link is not None and id(link) not in seen:
+        if isinstance(link, OSError):
+            return OSError(
+                link.errno,
+                f"could not write {os.fspath(path)!r} ({link.strerror or link}); any previous file is unchanged",
+            )
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return OSError(f"could not write {os.fspath(path)!r} ({cause}); any previous file is unchanged")
+
+
 @contextlib.contextmanager
 def atomic_output(path: PathLike) -> Iterator[str]:
     """Yields a temporary path to write; on success it replaces ``path`` atomically.
@@ -243,9 +262,7 @@ def atomic_output(path: PathLike) -> Iterator[str]:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         if isinstance(exc, OSError) and exc.errno in _WRITE_ERRNOS:
-            raise OSError(
-                exc.errno, f"could not write {text!r} ({exc.strerror or exc}); any previous file is unchanged"
-            ) from exc
+            raise write_error(text, exc) from exc
         raise
     finally:
         os.close(fd)

@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         export_projection(recognizer.projection, Path(tmp) / "projection.onnx")
         export_recognizer(recognizer, Path(tmp) / "recognizer.onnx")
-        coefficients = compare_with_eager(Path(tmp) / "projection.onnx", recognizer.projection, images)
-        labels = compare_with_eager(Path(tmp) / "recognizer.onnx", recognizer, images)
+        coefficients = compare_with_eager(recognizer.projection, Path(tmp) / "projection.onnx", images)
+        labels = compare_with_eager(recognizer, Path(tmp) / "recognizer.onnx", images)
     n = images.shape[0]
     agree = round(labels["label_agreement"] * n)
     print(f"COIL-20, alpha={args.alpha:g}: eager accuracy {result.accuracy:.2f}% over {result.n_test} views")

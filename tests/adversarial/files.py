@@ -33,7 +33,7 @@ def coil(tmp: Path, objects: int = 2, poses: int = 72, side: int = 8) -> Path:
 def model(tmp: Path) -> Path:
     """model.pt: a recognizer of (1, 4, 6) images, as ``eigview coil --save`` writes one."""
     path = tmp / "model.pt"
-    save_recognizer(path, make_recognizer())
+    save_recognizer(make_recognizer(), path)
     return path
 
 

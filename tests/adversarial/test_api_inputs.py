@@ -246,13 +246,13 @@ DECOMPOSITION = [
     ),
     Case(
         "streaming-seed-text",
-        lambda t: StreamingEigenspace(3, seed="x"),
+        lambda t: StreamingEigenspace(3, seed="x").fit(X),
         r"seed must be an integer, got str 'x'",
     ),  # type: ignore[arg-type]
     Case(
-        "streaming-method",
-        lambda t: StreamingEigenspace(3, method="magic").fit(X),
-        r"method='magic' must be one of",
+        "streaming-solver",
+        lambda t: StreamingEigenspace(3, solver="magic").fit(X),
+        r"solver='magic' must be one of",
     ),
     Case(
         "streaming-block-nan",
@@ -462,7 +462,7 @@ def _int32(tmp: Path) -> Path:
 
 def _state_dict_file(tmp: Path) -> Path:
     path = tmp / "s.pt"
-    save_state_dict(path, EigenProjection(10, 3).state_dict())
+    save_state_dict(EigenProjection.from_tensors(torch.zeros(10), torch.eye(10)[:3]).state_dict(), path)
     return path
 
 

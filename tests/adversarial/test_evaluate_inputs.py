@@ -26,7 +26,7 @@ import tifffile
 import torch
 
 from torch_eigview.apps.cli import main
-from torch_eigview.io.checkpoint import load_recognizer, save_recognizer
+from torch_eigview.io.checkpoint import load_recognizer, payload_digest, save_recognizer
 
 from tests.adversarial import files, views
 from tests.adversarial.harness import Case, Good, Ran, command, intact, judge, outcome, params
@@ -47,13 +47,16 @@ def _tampered(**change: Any) -> object:
         path = views.model(tmp)
         recognizer, meta = load_recognizer(path)
         thresholds = change.pop("reject_thresholds", None)
-        if thresholds is not None:  # past set_rejection's check, as a foreign writer would
-            recognizer.reject_thresholds = torch.tensor(thresholds, dtype=recognizer.codes.dtype)
         if "preprocessing" in change:
             meta["preprocessing"] = change["preprocessing"]
         else:
             meta["preprocessing"] = {**meta["preprocessing"], **change}
-        save_recognizer(path, recognizer, meta)
+        save_recognizer(recognizer, path, meta)
+        if thresholds is not None:  # past set_rejection's and save_recognizer's checks, as a foreign writer
+            payload = torch.load(path, weights_only=True)
+            payload["reject_thresholds"] = torch.tensor(thresholds, dtype=payload["codes"].dtype)
+            payload["sha256"] = payload_digest(payload)
+            torch.save(payload, path)
 
     return setup
 
@@ -62,7 +65,7 @@ def _without_rejection(tmp: Path) -> None:
     path = views.model(tmp)
     recognizer, meta = load_recognizer(path)
     recognizer.set_rejection(None)
-    save_recognizer(path, recognizer, meta)
+    save_recognizer(recognizer, path, meta)
 
 
 def _with(make: object, name: str) -> object:
@@ -124,9 +127,9 @@ PREP = [
 
 #: Tampered rejection thresholds (t_dffs, t_difs): (case id, values, what the error shows).
 THRESHOLDS = [
-    ("nan", [math.nan, math.nan], r"values \[nan, nan\]"),
-    ("negative", [-1.0, -1.0], r"values \[-1\.0, -1\.0\]"),
-    ("zero", [0.0, 0.0], r"values \[0\.0, 0\.0\]"),
+    ("nan", [math.nan, math.nan], r"got \[nan, nan\]"),
+    ("negative", [-1.0, -1.0], r"got \[-1\.0, -1\.0\]"),
+    ("zero", [0.0, 0.0], r"got \[0\.0, 0\.0\]"),
 ]
 
 EVALUATE = [
@@ -170,7 +173,7 @@ EVALUATE = [
             *VIEWS,
             "--reject",
             setup=_tampered(reject_thresholds=values),
-            match=r"model\.pt'? is a damaged .*reject_thresholds must be .*> 0.*" + match,
+            match=r"model\.pt'?: entry 'reject_thresholds' must be .*> 0.*" + match,
         )
         for id, values, match in THRESHOLDS
     ),
@@ -311,7 +314,7 @@ PREDICT = [
         "--reject",
         "{tmp}/egg/0.png",
         setup=_tampered(reject_thresholds=[math.nan, math.nan]),
-        match=r"model\.pt'? is a damaged .*reject_thresholds must be .*> 0.*nan",
+        match=r"model\.pt'?: entry 'reject_thresholds' must be .*> 0.*nan",
     ),
     _predict(
         "prep-channels-2",

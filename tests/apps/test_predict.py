@@ -24,7 +24,7 @@ from torch_eigview.io.checkpoint import save_recognizer
 from torch_eigview.io.onnx import export_recognizer
 from torch_eigview.io.onnx_check import check_recognizer_graph
 from torch_eigview.io.onnx_checksum import DIGEST_KEY, append_checksum
-from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.io.onnx_metadata import OnnxModelInfo, graph_doc_string
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
 
 from tests.helpers import rand, run_cli
@@ -59,13 +59,15 @@ def images(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
 
 
 def _rewrite(src: Path, dst: Path, edit: object) -> Path:
-    """A crafted model: ``src`` edited, with a valid checksum (what an attacker who
-    re-signs the file, or a bug in an exporter, would hand to predict)."""
+    """A crafted model: ``src`` edited, with a valid checksum and the graph's copy of the
+    metadata rewritten to match (what an attacker who re-signs the file, or a bug in an
+    exporter, would hand to predict; tests/io/test_model_content.py edits the metadata alone)."""
     m = onnx.load(str(src))
     kept = [p for p in m.metadata_props if p.key != DIGEST_KEY]
     del m.metadata_props[:]
     m.metadata_props.extend(kept)
     edit(m)  # type: ignore[operator]
+    m.graph.doc_string = graph_doc_string({p.key: p.value for p in m.metadata_props})
     onnx.save(m, str(dst))
     append_checksum(dst)
     return dst
@@ -95,17 +97,16 @@ def test_label_names_printed_escaped(
     )
 
 
-def test_wrong_label_list_length_is_a_per_row_error(
+def test_wrong_label_list_length_is_refused(
     model: Path, images: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     bad = _rewrite(model, tmp_path / "m.onnx", lambda m: _set_meta(m, "label_names", json.dumps(["a"])))
     code, _, err = run_cli(
         ["predict", "--onnx", str(bad), *images, "--json", str(tmp_path / "p.json")], capsys
     )
-    assert code == 1
-    assert "outside its 1 label names" in err
-    rows = json.loads((tmp_path / "p.json").read_text())
-    assert all(r["label"] == "a" for r in rows) and len(rows) + err.count("outside its") == len(images)
+    assert code == 2
+    assert "'label_names' must name every label index of the graph" in err and "got 1 names" in err
+    assert not (tmp_path / "p.json").exists()
 
 
 def _poison_codes(m: onnx.ModelProto) -> None:
@@ -236,7 +237,7 @@ def test_reject_prints_unknown(
         warnings.simplefilter("ignore")
         assert export_recognizer(rec, path).reject
     capsys.readouterr()  # the exporter's progress lines
-    save_recognizer(tmp_path / "reject.pt", rec)
+    save_recognizer(rec, tmp_path / "reject.pt")
     for flag, source in (("--onnx", path), ("--model", tmp_path / "reject.pt")):
         argv = ["predict", flag, str(source), "--reject", *files, "--json", str(tmp_path / "p.json")]
         code, out, _ = run_cli(argv, capsys)

@@ -47,7 +47,7 @@ def make_recognizer(
     flat = views.flatten(1)
     x_fit = flat / flat.norm(dim=1, keepdim=True) if unit_norm else flat
     space = Eigenspace(4).fit(x_fit)
-    projection = EigenProjection(
+    projection = EigenProjection.from_tensors(
         space.mean_,
         space.components_,
         space.eigenvalues_ if eigenvalues else None,
@@ -63,7 +63,7 @@ def make_recognizer(
 @pytest.fixture
 def saved(tmp_path: Path) -> Path:
     path = tmp_path / "model.pt"
-    save_recognizer(path, make_recognizer(), METADATA)
+    save_recognizer(make_recognizer(), path, METADATA)
     return path
 
 
@@ -80,7 +80,7 @@ def saved(tmp_path: Path) -> Path:
 def test_round_trip(tmp_path: Path, dtype: torch.dtype, variant: dict[str, bool]) -> None:
     rec = make_recognizer(dtype, **variant)
     path = tmp_path / "model.pt"
-    save_recognizer(str(path), rec, METADATA)
+    save_recognizer(rec, str(path), METADATA)
     loaded, metadata = load_recognizer(path)
 
     assert metadata == METADATA
@@ -102,7 +102,7 @@ def test_round_trip(tmp_path: Path, dtype: torch.dtype, variant: dict[str, bool]
 
 def test_metadata_defaults_to_empty(tmp_path: Path) -> None:
     path = tmp_path / "model.pt"
-    save_recognizer(path, make_recognizer())
+    save_recognizer(make_recognizer(), path)
     assert load_recognizer(path)[1] == {}
 
 
@@ -156,7 +156,7 @@ def test_wrong_version(saved: Path) -> None:
 
 def test_save_rejects_non_recognizer(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match="recognizer must be a NearestNeighborRecognizer"):
-        save_recognizer(tmp_path / "m.pt", make_recognizer().projection)  # type: ignore[arg-type]
+        save_recognizer(make_recognizer().projection, tmp_path / "m.pt")  # type: ignore[arg-type]
 
 
 def test_header_only_payload(tmp_path: Path) -> None:
@@ -170,7 +170,7 @@ def test_metadata_that_cannot_be_loaded_is_refused_at_save(tmp_path: Path) -> No
     path = tmp_path / "model.pt"
     metadata = {"root": Path("/data/coil-20-proc")}
     with pytest.raises(TypeError, match="metadata must hold JSON values"):
-        save_recognizer(path, make_recognizer(), metadata)
+        save_recognizer(make_recognizer(), path, metadata)
     assert not path.exists()
 
 
@@ -247,7 +247,7 @@ def test_save_replaces_atomically_and_keeps_the_old_file_on_failure(
     with pytest.raises(
         OSError, match=r"could not write .*model\.pt.*No space left.*previous file.*unchanged"
     ):
-        save_recognizer(saved, make_recognizer(unit_norm=False))
+        save_recognizer(make_recognizer(unit_norm=False), saved)
     assert saved.read_bytes() == before
     assert os.listdir(saved.parent) == ["model.pt"]  # the temporary file is gone
 
@@ -255,23 +255,23 @@ def test_save_replaces_atomically_and_keeps_the_old_file_on_failure(
 def test_bad_output_paths_are_refused_before_writing(tmp_path: Path) -> None:
     rec = make_recognizer()
     with pytest.raises(ValueError, match=r"path='.*' is a directory"):
-        save_recognizer(tmp_path, rec)
+        save_recognizer(rec, tmp_path)
     with pytest.raises(ValueError, match=r"path='.*missing/m.pt': the folder '.*missing' does not exist"):
-        save_recognizer(tmp_path / "missing" / "m.pt", rec)
+        save_recognizer(rec, tmp_path / "missing" / "m.pt")
     if os.path.exists("/dev/full"):
         with pytest.raises(ValueError, match=r"path='/dev/full' is a character device"):
-            save_recognizer("/dev/full", rec)
+            save_recognizer(rec, "/dev/full")
     assert os.listdir(tmp_path) == []
 
 
 def test_state_dict_round_trip_and_checksum(tmp_path: Path) -> None:
     projection = make_recognizer().projection
     path = tmp_path / "projection.pt"
-    save_state_dict(path, projection.state_dict())
+    save_state_dict(projection.state_dict(), path)
     state = load_state_dict(path)
     for name, value in projection.state_dict().items():
         assert torch.equal(state[name], value) if isinstance(value, torch.Tensor) else state[name] == value
-    copy = EigenProjection(torch.zeros(24), torch.zeros(4, 24), torch.zeros(4)).double()
+    copy = EigenProjection(24, 4).double()
     copy.load_state_dict(state)
     assert copy.image_shape == projection.image_shape and copy.unit_norm == projection.unit_norm
     payload = torch.load(path, weights_only=True)
@@ -281,12 +281,12 @@ def test_state_dict_round_trip_and_checksum(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"projection\.pt: checksum mismatch"):
         load_state_dict(path)
     with pytest.raises(TypeError, match=r"state_dict\['x'\] must be a tensor or JSON-like"):
-        save_state_dict(path, {"x": object()})
+        save_state_dict({"x": object()}, path)
     with pytest.raises(ValueError, match="is not a torch_eigview state_dict"):
         load_state_dict(_saved_recognizer(tmp_path))
 
 
 def _saved_recognizer(folder: Path) -> Path:
     path = folder / "recognizer.pt"
-    save_recognizer(path, make_recognizer())
+    save_recognizer(make_recognizer(), path)
     return path

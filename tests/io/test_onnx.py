@@ -44,7 +44,7 @@ def make_projection(unit_norm: bool) -> EigenProjection:
     x = rand(20, *IMAGE_SHAPE, seed=0).double()
     flat = x.flatten(1)
     space = Eigenspace(5).fit(flat / flat.norm(dim=1, keepdim=True) if unit_norm else flat)
-    return EigenProjection(
+    return EigenProjection.from_tensors(
         space.mean_.float(), space.components_.float(), image_shape=IMAGE_SHAPE, unit_norm=unit_norm
     )
 
@@ -58,7 +58,7 @@ def coil_model(folder: CoilFolder, tmp_path_factory: pytest.TempPathFactory) -> 
     """A recognizer of COIL objects 1-3 (dense gallery: no flow, fast), saved and exported."""
     result = CoilExperiment(method="dense", objects=OBJECTS, components=8).run(folder)
     out = tmp_path_factory.mktemp("onnx")
-    save_recognizer(out / "model.pt", result.recognizer, {"command": "test"})
+    save_recognizer(result.recognizer, out / "model.pt", {"command": "test"})
     export_recognizer(result.recognizer, out / "recognizer.onnx")
     export_projection(result.recognizer.projection, out / "projection.onnx")
     images = torch.cat([folder.images(obj, TEST_ANGLES) for obj in OBJECTS])
@@ -81,7 +81,7 @@ def test_projection_matches_eager(tmp_path: Path, unit_norm: bool, fold: bool) -
         x = rand(batch, *IMAGE_SHAPE, seed=batch)
         (got,) = sess.run(None, {"images": x.numpy()})
         assert got.shape == (batch, 5) and got.dtype == np.float32
-        assert compare_with_eager(path, projection, x, session=sess)["max_rel_err"] <= 1e-5
+        assert compare_with_eager(projection, path, x, session=sess)["max_rel_err"] <= 1e-5
     # The folded module is the same map in eager PyTorch too.
     x = rand(4, *IMAGE_SHAPE, seed=9)
     torch.testing.assert_close(FoldedProjection(projection)(x), projection(x), atol=1e-6, rtol=1e-5)
@@ -106,13 +106,13 @@ def test_recognizer_matches_eager_on_coil(coil_model: dict[str, object]) -> None
     out = Path(coil_model["dir"])  # type: ignore[arg-type]
     rec, images = coil_model["recognizer"], coil_model["images"]
     assert isinstance(images, torch.Tensor) and images.shape[0] == len(OBJECTS) * 19
-    report = compare_with_eager(out / "recognizer.onnx", rec, images)  # type: ignore[arg-type]
+    report = compare_with_eager(rec, out / "recognizer.onnx", images)  # type: ignore[arg-type]
     assert report["label_agreement"] == 1.0
     assert report["max_pose_diff"] == 0.0
     # Absolute: |z|² − 2z·g + |g|² cancels in float32 where a test view is in the gallery
     # (distance 0 reads ~sqrt(1e-7)), in eager PyTorch as in onnxruntime.
     assert report["max_distance_diff"] <= 1e-3
-    coefficients = compare_with_eager(out / "projection.onnx", rec.projection, images)  # type: ignore[union-attr]
+    coefficients = compare_with_eager(rec.projection, out / "projection.onnx", images)  # type: ignore[union-attr]
     assert coefficients["max_rel_err"] <= 1e-5
 
     info = read_metadata(out / "recognizer.onnx")
@@ -134,13 +134,13 @@ def test_kernel_projection(tmp_path: Path) -> None:
     info = export_projection(layer, path)
     assert info.kind == "projection" and info.n_components == 4 and info.image_shape == IMAGE_SHAPE
     x = rand(5, *IMAGE_SHAPE, seed=1)
-    assert compare_with_eager(path, layer, x)["max_rel_err"] <= 1e-5
+    assert compare_with_eager(layer, path, x)["max_rel_err"] <= 1e-5
     # A recognizer over the kernel projection exports too (its layer as it is, not folded).
     gallery = rand(6, *IMAGE_SHAPE, seed=2).double()
     rec = NearestNeighborRecognizer.from_views(layer, gallery, torch.tensor([4, 7] * 3), torch.arange(6.0))
     info = export_recognizer(rec, tmp_path / "kr.onnx")
     assert info.kind == "recognizer" and info.label_names == ("4", "7") and info.n_components == 4
-    assert compare_with_eager(tmp_path / "kr.onnx", rec, gallery.float())["label_agreement"] == 1.0
+    assert compare_with_eager(rec, tmp_path / "kr.onnx", gallery.float())["label_agreement"] == 1.0
 
 
 class _Toy(nn.Module):
@@ -162,7 +162,7 @@ def test_generic_module(tmp_path: Path) -> None:
     assert info.module == "_Toy" and info.n_components == 3 and not info.unit_norm
     assert toy.w.dtype == torch.float64  # exported from a float32 copy, the module untouched
     assert (
-        compare_with_eager(tmp_path / "t.onnx", toy.float(), rand(3, *IMAGE_SHAPE, seed=4))["max_rel_err"]
+        compare_with_eager(toy.float(), tmp_path / "t.onnx", rand(3, *IMAGE_SHAPE, seed=4))["max_rel_err"]
         <= 1e-5
     )
 
@@ -173,7 +173,7 @@ def test_export_errors(tmp_path: Path) -> None:
         export_onnx("model.pt", path)
     with pytest.raises(NotFittedError):
         export_onnx(Eigenspace(3), path)
-    no_shape = EigenProjection(torch.zeros(48), torch.eye(48)[:2])
+    no_shape = EigenProjection.from_tensors(torch.zeros(48), torch.eye(48)[:2])
     with pytest.raises(ValueError, match="image_shape is None"):
         export_projection(no_shape, path)
     with pytest.raises(ValueError, match="opset_version=17 must be >= 18"):
@@ -188,7 +188,7 @@ def test_export_errors(tmp_path: Path) -> None:
     [
         ({}, "was not exported by torch_eigview"),
         ({"format": "torch_eigview.io.onnx", "format_version": "99"}, "format version '99'"),
-        ({"format": "torch_eigview.io.onnx", "format_version": "1", "kind": "recognizer"}, "damaged"),
+        ({"format": "torch_eigview.io.onnx", "format_version": "2", "kind": "recognizer"}, "damaged"),
     ],
     ids=["foreign", "version", "damaged"],
 )

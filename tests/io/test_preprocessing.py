@@ -71,7 +71,8 @@ def test_onnx_metadata_carries_it() -> None:
     assert OnnxModelInfo.from_props(with_prep.to_props()) == with_prep
     bad = {**with_prep.to_props(), "preprocessing": Preprocessing((8, 7), 1).to_prop()}
     with pytest.raises(
-        ValueError, match=r"damaged torch_eigview metadata: preprocessing gives images \(1, 8, 7\)"
+        ValueError,
+        match=r"damaged torch_eigview metadata: preprocessing must give images of image_shape \[1, 8, 6\], got \[1, 8, 7\]",
     ):
         OnnxModelInfo.from_props(bad)
 

@@ -36,13 +36,14 @@ from typing import Any
 
 import numpy as np
 
+from torch_eigview.apps.device_option import DEVICE_HELP, device_arg
 from torch_eigview.apps.prediction import Prediction, escape
 from torch_eigview.files import check_output_path, write_json
 from torch_eigview.io.images import check_regular_file, read_image, to_unit_float
 from torch_eigview.io.onnx_check import check_recognizer_graph
 from torch_eigview.io.onnx_checksum import verify_checksum
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
-from torch_eigview.io.preprocessing import prepare_array
+from torch_eigview.io.preprocessing import prepare_file
 from torch_eigview.lazy import require
 
 __all__ = ["OnnxRecognizer", "add_arguments", "main", "read_info", "run"]
@@ -99,13 +100,7 @@ class OnnxRecognizer:
         """
         prep = self.info.preprocessing
         if prep is not None:
-            arr = read_image(path, keep_alpha=prep.background != "keep")
-            mask = arr[-1] > 0 if arr.shape[0] in (2, 4) else None  # the alpha channel decides
-            colour = arr[:-1] if mask is not None else arr
-            try:
-                return prepare_array(to_unit_float(colour, np.float32), prep, mask)
-            except ValueError as exc:
-                raise ValueError(f"image {path}: {exc}") from None
+            return prepare_file(path, prep)
         arr = read_image(path)
         if tuple(arr.shape) != self.info.image_shape:
             raise ValueError(
@@ -167,8 +162,8 @@ def read_info(path: str) -> OnnxModelInfo:
         except Exception as ort_exc:
             raise ValueError(f"ONNX model {path!r} could not be loaded by onnxruntime: {ort_exc}") from exc
         raise ValueError(f"ONNX model {path!r} could not be loaded by onnx: {exc}") from exc
-    props = {p.key: p.value for p in model.metadata_props}
-    return OnnxModelInfo.from_props(props, source=f"ONNX model {path!r}")
+    # The metadata as the graph recorded it at export: an edited entry is refused.
+    return OnnxModelInfo.from_model(model, source=f"ONNX model {path!r}")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -184,6 +179,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "images", nargs="+", metavar="IMAGE", help="image files, each (C, H, W) like the model's"
     )
     parser.add_argument("--json", metavar="FILE", help="write a list of {image, label, pose, distance}")
+    parser.add_argument(
+        "--device",
+        type=device_arg,
+        default=None,
+        metavar="DEV",
+        help=f"with --model: where the projection and the search run: {DEVICE_HELP} (default cpu; "
+        "--onnx runs on onnxruntime's CPU provider)",
+    )
     parser.add_argument(
         "--reject",
         action="store_true",
@@ -225,8 +228,12 @@ def run(args: argparse.Namespace) -> int:
     if args.model is not None:
         from torch_eigview.apps.predict_model import ModelRecognizer  # imports torch
 
-        model = ModelRecognizer(args.model)
+        model = ModelRecognizer(args.model, device="cpu" if args.device is None else args.device)
     else:
+        if args.device is not None:
+            raise ValueError(
+                f"--device {args.device} applies to --model only: --onnx runs on onnxruntime's CPU provider"
+            )
         model = OnnxRecognizer(args.onnx)
     if args.reject and not model.info.reject:
         raise ValueError(

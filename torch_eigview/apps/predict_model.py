@@ -1,7 +1,7 @@
 """``eigview predict --model model.pt``: a model file in torch, with ``eigview predict``'s interface.
 
 The images go through the model's recorded preprocessing exactly as ``eigview evaluate``
-reads its views (:func:`~torch_eigview.datasets.image_views.read_view`), so a file gives
+reads its views (:func:`~torch_eigview.datasets.seed_views.read_images`), so a file gives
 the same answer in either command.
 """
 
@@ -13,9 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from torch_eigview.apps.device_option import resolve_device
 from torch_eigview.apps.prediction import Prediction
 from torch_eigview.datasets.background import background_rule
-from torch_eigview.datasets.image_views import read_view
+from torch_eigview.datasets.seed_views import read_images
 from torch_eigview.io.model import load_model
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 
@@ -27,18 +28,21 @@ class ModelRecognizer:
 
     Args:
         path: the model file; its checksum is verified on load.
+        device: where the projection and the search run (``--device``: ``cpu``, ``cuda``,
+            ``cuda:N`` or ``auto``); the images are read on the CPU and moved there.
 
     Attributes:
         info: what the model takes and answers, as an exported graph's metadata would say.
 
     Raises:
         ValueError: the file is missing, damaged or not a recognizer's, or its
-            preprocessing record is.
+            preprocessing record is; ``device`` names CUDA where there is none.
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], device: str = "cpu") -> None:
+        where = resolve_device(device)  # no CUDA: named before the model is read
         model = load_model(path)
-        self.path, self.recognizer, self.prep = model.path, model.recognizer, model.preprocessing
+        self.path, self.recognizer, self.prep = model.path, model.recognizer.to(where), model.preprocessing
         self.background = background_rule(self.prep.background, self.prep.colour, self.prep.tolerance)
         self._names = {label: name for name, label in model.label_table().items()}
         self.info = OnnxModelInfo(
@@ -62,18 +66,11 @@ class ModelRecognizer:
             ValueError: not a regular file, unreadable, an all-background alpha, or a
                 background that leaves no object; the message names it.
         """
-        image, _ = read_view(
-            path,
-            size=self.prep.size,
-            channels=self.prep.channels,
-            dtype=torch.float32,
-            background=self.background,
-        )
-        return image.numpy()
+        return read_images(path, self.prep, dtype=torch.float32)[0].numpy()
 
     def predict_rows(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction | str]:
         """Recognizes (B, C, H, W) float32 ``images``; ``names`` are their files."""
-        x = torch.from_numpy(images).to(self.recognizer.codes.dtype)
+        x = torch.from_numpy(images).to(self.recognizer.codes.device, self.recognizer.codes.dtype)
         with torch.no_grad():
             result = self.recognizer.predict(x, reject=self.recognizer.rejects)
         known = [None] * len(names) if result.known is None else result.known.tolist()

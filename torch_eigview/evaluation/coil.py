@@ -147,7 +147,8 @@ class CoilExperiment:
         check_int(self.workers, "workers", minimum=0)
         check_choice(self.worker_kind, "worker_kind", KINDS)
         if self.kernel is not None:
-            KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)  # validates both
+            # Validates both (stored as given, checked when a fit starts: here, before any work).
+            KernelEigenspace(self.components, kernel=self.kernel, gamma=self.gamma)._validate_params()
         elif self.gamma is not None:
             raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
         if self.seeds is None:  # the full circle sets its own angles

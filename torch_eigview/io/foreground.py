@@ -188,11 +188,20 @@ def estimate_foreground(
     near = np.zeros((h, w), dtype=bool)
     for colour, tol in colours:
         near |= _distance(pixels, colour, 2) <= tol
+    described = ", ".join(
+        f"({', '.join(f'{v:.3g}' for v in col.tolist())}) ± {tol:.3g}" for col, tol in colours
+    )
+    if background is not None and not near[ring].any():
+        # A backdrop surrounds the object: a given colour found nowhere on the border is
+        # not the backdrop's, and would remove nothing (or only specks inside the object).
+        seen = ", ".join(f"{v:.3g}" for v in _lower_median(pixels[ring]).tolist())
+        raise ValueError(
+            f"background={described} (given; intensities in [0, 1]) matches no pixel of the border of {where}, "
+            f"whose median colour is ({seen}): nothing would be removed; give the backdrop's colour or a "
+            "larger tolerance"
+        )
     mask = clean_mask(~near, math.ceil(min_fraction * h * w))
     if not mask.any():
-        described = ", ".join(
-            f"({', '.join(f'{v:.3g}' for v in col.tolist())}) ± {tol:.3g}" for col, tol in colours
-        )
         source = "given" if background is not None else "estimated from the border"
         raise ValueError(
             f"background={described} ({source}) leaves no object in {where}: every pixel is within the tolerance "

@@ -26,7 +26,7 @@ import stat
 
 import numpy as np
 
-__all__ = ["check_regular_file", "read_image", "to_unit_float"]
+__all__ = ["check_regular_file", "image_size", "read_image", "to_unit_float"]
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -110,6 +110,19 @@ def _decode_pillow(path: str | os.PathLike[str]) -> tuple[np.ndarray | None, int
             return None, frames
         # Pillow's buffer is read-only; the caller gets its own array, as from scikit-image.
         return np.array(colours), frames
+
+
+def image_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
+    """(H, W) of an image file from its header, nothing decoded; None where Pillow does
+    not know the format or cannot open the file (:func:`read_image` then says why)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            w, h = im.size
+    except Exception:
+        return None
+    return int(h), int(w)
 
 
 def read_image(path: str | os.PathLike[str], *, keep_alpha: bool = False, what: str = "image") -> np.ndarray:

@@ -12,15 +12,19 @@ means the same to each of them.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from torch_eigview.io.checkpoint import load_recognizer
 from torch_eigview.io.images import check_regular_file
-from torch_eigview.io.preprocessing import Preprocessing
-from torch_eigview.nn.recognition import NearestNeighborRecognizer
+from torch_eigview.io.preprocessing import Preprocessing, prepare_file
+from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
 
 __all__ = ["Model", "load_model", "model_preprocessing"]
+
+# The writers that always record the preprocessing ("command" in the metadata).
+_RECORDING = {"fit": "eigview fit", "python": "FewViewEigenspace.save"}
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,30 @@ class Model:
         names = self.recognizer.label_names or [str(label) for label in distinct]
         return dict(zip(names, distinct, strict=True))
 
+    def predict_files(
+        self, paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], *, reject: bool = False
+    ) -> Recognition:
+        """Recognizes image files read through the recorded preprocessing
+        (:func:`~torch_eigview.io.preprocessing.prepare_file`, as ``eigview predict`` reads
+        them): the labels, poses and distances of ``eigview predict --model``.
+
+        Returns:
+            The recognizer's :class:`~torch_eigview.nn.recognition.Recognition`: (B,)
+            labels (``label_table()`` maps names to them), poses, distances, gallery indices
+            and, with ``reject``, ``known``.
+        """
+        import numpy as np
+        import torch
+
+        files = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
+        codes = self.recognizer.codes
+        arrays = [prepare_file(path, self.preprocessing) for path in files]
+        shape = self.preprocessing.image_shape
+        stacked = np.stack(arrays) if arrays else np.zeros((0, *shape), np.float32)
+        images = torch.from_numpy(stacked).to(dtype=codes.dtype, device=codes.device)
+        with torch.no_grad():
+            return self.recognizer.predict(images, reject=reject)
+
 
 def model_preprocessing(
     recognizer: NearestNeighborRecognizer, metadata: dict[str, Any], source: str
@@ -69,7 +97,19 @@ def model_preprocessing(
             raise ValueError(
                 f"{source}: its preprocessing gives {prep.image_shape}, its eigenspace takes {shape}"
             )
+        unit_norm = bool(recognizer.projection.unit_norm)
+        if prep.unit_norm != unit_norm:
+            raise ValueError(
+                f"{source}: its preprocessing record says unit_norm={prep.unit_norm}, its eigenspace "
+                f"unit_norm={unit_norm}: the record must describe the projection"
+            )
         return prep
+    if metadata.get("command") in _RECORDING:
+        raise ValueError(
+            f"{source} was written by {_RECORDING[metadata['command']]} but has no 'preprocessing' "
+            "record in its metadata (a field such a file always holds): the file was edited or "
+            "damaged; fit it again"
+        )
     if shape is None or shape[0] not in (1, 3):
         raise ValueError(
             f"{source} records no preprocessing and takes images {shape}: write it with eigview fit"

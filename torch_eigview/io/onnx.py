@@ -32,6 +32,7 @@ from torch import nn
 
 from torch_eigview.check import check_float_tensor, check_int, check_ndim
 from torch_eigview.files import atomic_output, check_output_path
+from torch_eigview.io.onnx_check import check_graph_content
 from torch_eigview.io.onnx_checksum import append_checksum, verify_checksum
 from torch_eigview.io.onnx_graphs import (
     ExportedRecognizer,
@@ -39,7 +40,7 @@ from torch_eigview.io.onnx_graphs import (
     image_shape_of,
     projection_module,
 )
-from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.io.onnx_metadata import OnnxModelInfo, graph_doc_string
 from torch_eigview.io.preprocessing import Preprocessing
 from torch_eigview.lazy import require
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
@@ -256,6 +257,7 @@ def _save_graph(
         if program is None:  # only with dynamo=False; keeps type checkers informed
             raise RuntimeError("torch.onnx.export returned no program")
         program.model.metadata_props.update(props)
+        program.model.graph.doc_string = graph_doc_string(props)  # the metadata, checked on load
         with atomic_output(path) as tmp:
             # One file: weights as external data would escape the checksum and the atomic rename.
             program.save(tmp, external_data=False)
@@ -267,6 +269,7 @@ def _save_graph(
     torch.onnx.export(graph, (sample,), buffer, dynamo=False, dynamic_axes=axes, **names)  # type: ignore[arg-type]
     proto = onnx.load_from_string(buffer.getvalue())
     onnx.helper.set_model_props(proto, props)
+    proto.graph.doc_string = graph_doc_string(props)
     with atomic_output(path) as tmp:
         onnx.save(proto, tmp)
         append_checksum(tmp)
@@ -303,22 +306,28 @@ def export_recognizer(
 
 
 def read_metadata(path: str | os.PathLike[str]) -> OnnxModelInfo:
-    """The :class:`OnnxModelInfo` of an exported file, after verifying its checksum.
+    """The :class:`OnnxModelInfo` of an exported file, after verifying its checksum and its
+    content: the metadata as the graph recorded it at export
+    (:meth:`OnnxModelInfo.from_model`), the graph's input of the metadata's image shape and,
+    for a recognizer, label indices within its label names
+    (:func:`~torch_eigview.io.onnx_check.check_graph_content`).
 
     Raises:
-        ValueError: the file is missing, corrupted (checksum mismatch) or not exported by
-            torch_eigview.
+        ValueError: the file is missing, corrupted (checksum mismatch), not exported by
+            torch_eigview, or its metadata was edited or contradicts the graph.
     """
     onnx = require("onnx", "onnx", "read_metadata")
     verify_checksum(path)
     model = onnx.load(os.fspath(path), load_external_data=False)
-    props = {p.key: p.value for p in model.metadata_props}
-    return OnnxModelInfo.from_props(props, source=os.fspath(path))
+    source = f"ONNX model {os.fspath(path)!r}"
+    info = OnnxModelInfo.from_model(model, source)
+    check_graph_content(model.graph, info, source)
+    return info
 
 
 def compare_with_eager(
-    path: str | os.PathLike[str],
     model: nn.Module,
+    path: str | os.PathLike[str],
     images: torch.Tensor,
     *,
     batch_size: int = 64,
@@ -326,9 +335,11 @@ def compare_with_eager(
 ) -> dict[str, float]:
     """Runs the ONNX file in onnxruntime (CPU) and ``model`` eagerly on the same images.
 
+    Arguments come in the order of :func:`export_onnx`: the module, then the file.
+
     Args:
-        path: the exported file.
         model: the module it was exported from (projection or recognizer).
+        path: the exported file.
         images: (B, C, H, W) float32 images.
         batch_size: images per onnxruntime call.
         session: an ``onnxruntime.InferenceSession`` to reuse.
@@ -341,12 +352,17 @@ def compare_with_eager(
         ``|z|² − 2 z·g + |g|²`` (as in eager), which cancels near zero: in float32 a true
         distance of 0 reads up to about ``sqrt(1e-7 · |z|²)``, some 1e-4 for unit-norm views.
     """
+    if isinstance(model, (str, os.PathLike)):
+        raise TypeError(
+            "compare_with_eager takes (model, path, images), the module first as export_onnx does; got "
+            f"the path {os.fspath(model)!r} first: swap the first two arguments"
+        )
     if not isinstance(images, torch.Tensor) or images.ndim != 4 or images.shape[0] == 0:
         shape = tuple(images.shape) if isinstance(images, torch.Tensor) else type(images).__name__
         raise ValueError(f"images must be a (B, C, H, W) tensor with B >= 1 to compare, got {shape}")
     if session is None:
         onnxruntime = require("onnxruntime", "onnx", "compare_with_eager")
-        verify_checksum(path)
+        read_metadata(path)  # the checksum and the content, as eigview predict checks them
         session = onnxruntime.InferenceSession(os.fspath(path), providers=["CPUExecutionProvider"])
     x = images.detach().cpu().float()
     chunks: list[Sequence[np.ndarray]] = [

@@ -3,7 +3,8 @@
 ``eigview predict`` runs files it did not write. A graph that passes this check is one
 :mod:`torch_eigview.io.onnx` could have written: ``onnx.checker`` accepts it, it has the one
 ``images`` input (B, C, H, W) float32 of its metadata and the recognizer's three outputs
-(four, with ``known``, when its metadata says it rejects),
+(four, with ``known``, when its metadata says it rejects), label indices that its label
+names name one to one (:func:`check_graph_content`, which ``read_metadata`` runs too),
 it uses only the operators our exports use (nothing that builds a tensor of a size read
 from data: no ``Expand``, ``Tile``, ``ConstantOfShape``, ``Range``, ``Resize``, loops), its
 weights are finite and its weights and per-image intermediate tensors (from ONNX shape
@@ -22,7 +23,7 @@ import numpy as np
 from torch_eigview.config import get_config
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
 
-__all__ = ["ALLOWED_OPS", "MODEL_BYTES", "check_recognizer_graph", "model_byte_limit"]
+__all__ = ["ALLOWED_OPS", "MODEL_BYTES", "check_graph_content", "check_recognizer_graph", "model_byte_limit"]
 
 # The operators of every graph torch_eigview exports (linear and kernel recognizers, with
 # and without unit norm, opsets 18 and later), and a few of the same kind (elementwise,
@@ -51,7 +52,7 @@ def _dims(value: Any) -> list[int | str]:
     return [d.dim_value if d.HasField("dim_value") else d.dim_param for d in value.type.tensor_type.shape.dim]
 
 
-def _check_io(graph: Any, info: OnnxModelInfo, source: str) -> None:
+def _check_input(graph: Any, info: OnnxModelInfo, source: str) -> None:
     import onnx
 
     inputs = [i for i in graph.input if i.name not in {t.name for t in graph.initializer}]
@@ -64,6 +65,44 @@ def _check_io(graph: Any, info: OnnxModelInfo, source: str) -> None:
         )
     if inputs[0].type.tensor_type.elem_type != onnx.TensorProto.FLOAT:
         raise ValueError(f"{source} must take float32 images")
+
+
+def _check_label_index(graph: Any, info: OnnxModelInfo, source: str) -> None:
+    """The constant the ``label_index`` output gathers from: one index per gallery view,
+    each within the label names, every name used (one per distinct label)."""
+    from onnx import numpy_helper
+
+    constants = {t.name: t for t in graph.initializer}
+    producer = next((n for n in graph.node if "label_index" in n.output), None)
+    table = None if producer is None or not producer.input else constants.get(producer.input[0])
+    if table is None or table.data_location == 1:
+        return  # not the form our exports have: onnxruntime's rows are checked per image
+    values = numpy_helper.to_array(table)
+    n_names = len(info.label_names)
+    if values.dtype.kind not in "iu" or values.size == 0:
+        raise ValueError(f"{source}: the label indices {table.name!r} must be integers, got {values.dtype}")
+    used = np.unique(values)
+    if used.min() < 0 or used.max() >= n_names or len(used) != n_names:
+        raise ValueError(
+            f"{source}: metadata entry 'label_names' must name every label index of the graph "
+            f"({len(used)} distinct indices in [{used.min()}, {used.max()}]), got {n_names} names"
+        )
+
+
+def check_graph_content(graph: Any, info: OnnxModelInfo, source: str) -> None:
+    """Checks a graph against its metadata: one input ``images`` (B, C, H, W) float32 of the
+    metadata's ``image_shape``; for a recognizer, label indices matching ``label_names``.
+
+    Raises:
+        ValueError: a mismatch, naming ``source``.
+    """
+    _check_input(graph, info, source)
+    if info.kind == "recognizer":
+        _check_label_index(graph, info, source)
+
+
+def _check_io(graph: Any, info: OnnxModelInfo, source: str) -> None:
+    check_graph_content(graph, info, source)
     names = tuple(o.name for o in graph.output)
     expected = (*OUTPUTS, "known") if info.reject else OUTPUTS
     if names != expected:

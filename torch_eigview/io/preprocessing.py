@@ -15,14 +15,16 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from torch_eigview.io.foreground import LUMA, colour_in_channels, estimate_foreground
+from torch_eigview.io.images import read_image, to_unit_float
 
-__all__ = ["BACKGROUNDS", "RESIZE_RULE", "Preprocessing", "prepare_array"]
+__all__ = ["BACKGROUNDS", "RESIZE_RULE", "Preprocessing", "prepare_array", "prepare_file"]
 
 RESIZE_RULE = "bilinear-antialias"
 """Images: antialiased bilinear (each output pixel averages its footprint); masks: the
@@ -199,7 +201,8 @@ def prepare_array(image: np.ndarray, prep: Preprocessing, mask: np.ndarray | Non
         image: ``(C, H, W)`` with C 1 or 3.
         prep: the model's preprocessing.
         mask: optional ``(H, W)`` bool foreground of ``image`` (an alpha channel's), True
-            on the object; unused with ``"keep"``.
+            on the object; unused with ``"keep"``; all True (an opaque alpha channel) is
+            no mask.
 
     Returns:
         ``prep.image_shape`` float32.
@@ -222,6 +225,8 @@ def prepare_array(image: np.ndarray, prep: Preprocessing, mask: np.ndarray | Non
     if prep.background == "keep":
         return np.ascontiguousarray(_resize(_convert(work, prep.channels), prep.size))
     work = _resize(work, prep.size)
+    if mask is not None and mask.all():
+        mask = None  # an opaque alpha channel marks no background: as read_view, no mask
     if mask is None:
         colour = None if prep.colour is None else colour_in_channels(prep.colour, work.shape[0])
         fg = estimate_foreground(work, colour, prep.tolerance)
@@ -230,3 +235,24 @@ def prepare_array(image: np.ndarray, prep: Preprocessing, mask: np.ndarray | Non
         if not fg.any():
             raise ValueError("the mask is all background (no object pixel): a view must show its object")
     return np.ascontiguousarray(_convert(np.where(fg[None], work, np.float32(0.0)), prep.channels))
+
+
+def prepare_file(path: str | os.PathLike[str], prep: Preprocessing) -> np.ndarray:
+    """An image file as the model's input, without torch: read (the alpha channel as the
+    mask where the background is not kept), then :func:`prepare_array`. ``eigview predict``
+    (both runtimes) and :meth:`~torch_eigview.io.model.Model.predict_files` read so.
+
+    Returns:
+        ``prep.image_shape`` float32.
+
+    Raises:
+        ValueError: the file cannot be read, or its mask or background leaves no object;
+            the message names the file.
+    """
+    arr = read_image(path, keep_alpha=prep.background != "keep")
+    mask = arr[-1] > 0 if arr.shape[0] in (2, 4) else None  # the alpha channel decides
+    colour = arr[:-1] if mask is not None else arr
+    try:
+        return prepare_array(to_unit_float(colour, np.float32), prep, mask)
+    except ValueError as exc:
+        raise ValueError(f"image {os.fspath(path)}: {exc}") from None
