@@ -206,3 +206,26 @@ def smooth_views(obj: int, n_views: int = 41, channels: int = 1, size: int = 128
     wide = F.interpolate(low, size=(size, size + n_views), mode="bicubic", align_corners=False)[0]
     cols = torch.arange(size)[None, :] + torch.arange(n_views)[:, None]  # (T, size)
     return wide[:, :, cols].permute(2, 0, 1, 3).contiguous().clamp_(0, 1)
+
+
+def rendered_turntable(root: Any, azimuths: Sequence[float], side: int = 32) -> Any:
+    """``root``/views.csv listing the rendered egg and head at ``azimuths`` (degrees), as 8-bit
+    gray PNGs ``{object}/{azimuth % 360}.png``, ``side`` pixels square; returns its path."""
+    from pathlib import Path
+
+    import numpy as np
+    import skimage.io
+
+    from torch_eigview.datasets import OrthographicCamera, make_object, render_views
+
+    root = Path(root)
+    rows = ["path,object,azimuth"]
+    for name in ("egg", "head"):
+        images = render_views(make_object(name, seed=1), list(azimuths), OrthographicCamera(side))
+        (root / name).mkdir(parents=True, exist_ok=True)
+        for az, image in zip(azimuths, images, strict=True):
+            pixels = (image[0].clamp(0, 1).numpy() * 255).round().astype(np.uint8)
+            skimage.io.imsave(root / name / f"{az % 360:g}.png", pixels, check_contrast=False)
+            rows.append(f"{name}/{az % 360:g}.png,{name},{az:g}")
+    (root / "views.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return root / "views.csv"

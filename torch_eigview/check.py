@@ -175,7 +175,12 @@ def check_image_shape(image_shape: object, n_features: int, name: str) -> tuple[
 def check_view_input(
     x: object, in_features: int, image_shape: tuple[int, int, int] | None, dtype: torch.dtype
 ) -> None:
-    """Checks a batch of views for a frozen layer: (B, N) or (B, C, H, W) of the layer's dtype.
+    """Checks a batch of views for a frozen layer: (B, N) or (B, C, H, W), floating.
+
+    Any floating dtype passes: the layer casts its input to ``dtype`` (its buffers'), so
+    autocast's bfloat16 or float16 activations and float64 inputs feed a float32 layer as
+    they are. Integer images (uint8 pixels in [0, 255]) are refused: the eigenspace was
+    fitted on views in [0, 1], so a silent cast would project values 255 times too large.
 
     Static checks only (ndim, trailing sizes, dtype): torch.export and torch.compile evaluate
     them once and never on data. torch.jit.trace cannot record Python checks (its sizes are
@@ -196,10 +201,10 @@ def check_view_input(
         ok = x.ndim in (2, 4) and math.prod(trailing) == in_features
     if not ok:
         raise ValueError(f"x must have shape {layout}, got shape {tuple(x.shape)}")
-    if x.dtype != dtype:
+    if not x.dtype.is_floating_point:
         raise TypeError(
-            f"x must have the dtype of the layer's buffers ({dtype}), got {x.dtype}; "
-            "convert the input or the layer with .to(dtype)"
+            f"x must have a floating dtype (the layer casts it to its buffers' {dtype}), got {x.dtype}; "
+            "scale integer images to [0, 1] floats first (e.g. x.float() / 255)"
         )
 
 

@@ -168,7 +168,7 @@ def test_module_unit_norm_and_gradients() -> None:
 
 def test_module_state_dict_restores_kernel_and_repr() -> None:
     module = make_module("poly", unit_norm=True)
-    fresh = KernelProjection(
+    fresh = KernelProjection.from_tensors(
         torch.zeros(20, N_FEATURES),
         torch.zeros(20, K),
         torch.zeros(20),
@@ -250,10 +250,12 @@ def test_recognizer_accepts_kernel_projection() -> None:
         (dict(n_components=0), ValueError, r"n_components=0 must be >= 1"),
     ],
 )
-def test_constructor_errors(kwargs: dict[str, object], error: type[Exception], match: str) -> None:
+def test_argument_errors_at_fit(kwargs: dict[str, object], error: type[Exception], match: str) -> None:
     kwargs.setdefault("n_components", K)
+    est = KernelEigenspace(**kwargs)  # type: ignore[arg-type]  # stored as given (scikit-learn's habit)
+    assert all(getattr(est, name) is value for name, value in kwargs.items())
     with pytest.raises(error, match=match):
-        KernelEigenspace(**kwargs)  # type: ignore[arg-type]
+        est.fit(views(10))
 
 
 def test_fit_and_transform_errors() -> None:
@@ -284,14 +286,17 @@ def test_fit_and_transform_errors() -> None:
 
 def test_module_errors() -> None:
     with pytest.raises(TypeError, match=r"got a callable: a callable kernel cannot be exported"):
-        KernelProjection(torch.eye(3), torch.ones(3, 1), torch.zeros(3), kernel=lambda a, b: a)  # type: ignore[arg-type]
+        KernelProjection.from_tensors(torch.eye(3), torch.ones(3, 1), torch.zeros(3), kernel=lambda a, b: a)
     with pytest.raises(ValueError, match=r"coefficients must have shape \(3, k\)"):
-        KernelProjection(torch.eye(3), torch.ones(2, 1), torch.zeros(3))
+        KernelProjection.from_tensors(torch.eye(3), torch.ones(2, 1), torch.zeros(3))
     module = make_module("rbf")
     with pytest.raises(ValueError, match=r"x must have shape \(B, 12\) or \(B, 1, 3, 4\)"):
         module(torch.zeros(2, 13, dtype=torch.float64))
-    with pytest.raises(TypeError, match=r"x must have the dtype of the layer's buffers"):
-        module(torch.zeros(2, 12))
+    with pytest.raises(TypeError, match=r"x must have a floating dtype"):
+        module(torch.zeros(2, 12, dtype=torch.int32))
+    # Any floating dtype is cast to the buffers' (float64 here).
+    x = torch.rand(2, 12, dtype=torch.float64)
+    torch.testing.assert_close(module(x.float()), module(x.float().double()), atol=0, rtol=0)
 
 
 # --------------------------------------------------------------------------- COIL
@@ -318,8 +323,9 @@ def test_coil_experiment_with_kernel_pca(folder: CoilFolder) -> None:
 
 
 @pytest.mark.coil
-def test_cli_kernel_option(coil_root: Path) -> None:
+def test_cli_kernel_option(coil_root: Path, tmp_path: Path) -> None:
     from torch_eigview.apps.cli import main
+    from torch_eigview.io.model import load_model
 
     args = [
         "coil",
@@ -351,6 +357,8 @@ def test_cli_kernel_option(coil_root: Path) -> None:
     with contextlib.redirect_stdout(stdout):
         assert main(args) == 0
     assert "kernel PCA (poly, gamma=2)" in stdout.getvalue().splitlines()[0]
-    with pytest.raises(SystemExit) as exit_info, contextlib.redirect_stderr(io.StringIO()) as err:
-        main([*args, "--save", "model.pt"])
-    assert exit_info.value.code == 2 and "cannot be used with --kernel" in err.getvalue()
+    with contextlib.redirect_stdout(io.StringIO()):  # a kernel model is saved like a linear one
+        assert main([*args, "--save", str(tmp_path / "model.pt")]) == 0
+    projection = load_model(tmp_path / "model.pt").recognizer.projection
+    assert isinstance(projection, KernelProjection)
+    assert (projection.kernel, projection.gamma, projection.degree) == ("poly", 2.0, 3)

@@ -40,7 +40,8 @@ def test_state_dict_loads_into_a_layer_built_from_sizes(kernel: str) -> None:
 def test_from_tensors_and_sizes_validation() -> None:
     vectors, coefficients, kernel_mean = torch.eye(4), torch.ones(4, 2) / 4, torch.full((4,), 0.25)
     a = KernelProjection.from_tensors(vectors, coefficients, kernel_mean, kernel="linear")
-    b = KernelProjection(vectors, coefficients, kernel_mean, "linear")
+    with pytest.warns(DeprecationWarning, match=r"KernelProjection\.from_tensors\(vectors, coefficients"):
+        b = KernelProjection(vectors, coefficients, kernel_mean, "linear")  # the old tensor form
     x = torch.rand(3, 4, generator=torch.Generator().manual_seed(2))
     torch.testing.assert_close(a(x), b(x), atol=0, rtol=0)
     assert KernelProjection(4, 4, 2).coefficients.shape == (4, 2)
@@ -51,6 +52,6 @@ def test_from_tensors_and_sizes_validation() -> None:
     with pytest.raises(TypeError, match=r"eigenvalues must be None when the layer is built from sizes"):
         KernelProjection(4, 4, 2, eigenvalues=torch.ones(2))
     with pytest.raises(TypeError, match=r"kernel_mean must be a torch\.Tensor, got int"):
-        KernelProjection(vectors, coefficients, 4)  # type: ignore[arg-type]
+        KernelProjection.from_tensors(vectors, coefficients, 4)  # type: ignore[arg-type]
     with pytest.raises(TypeError, match=r"vectors must be a torch\.Tensor, got int"):
         KernelProjection.from_tensors(4, coefficients, kernel_mean)  # type: ignore[arg-type]

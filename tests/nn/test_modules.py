@@ -81,7 +81,7 @@ def _space(dtype: torch.dtype) -> Eigenspace:
 
 def _unit_norm_projection(dtype: torch.dtype) -> EigenProjection:
     space = _space(dtype)
-    return EigenProjection(
+    return EigenProjection.from_tensors(
         space.mean_, space.components_, space.eigenvalues_, image_shape=IMAGE, unit_norm=True
     )
 

@@ -80,8 +80,28 @@ def test_dtype_conversion() -> None:
     torch.testing.assert_close(double(x.double()), module(x).double(), atol=1e-5, rtol=1e-5)
     half = make_module(torch.float32).to(torch.float64)
     assert half.components.dtype == torch.float64
-    with pytest.raises(TypeError, match=r"x must have the dtype of the layer's buffers \(torch.float64\)"):
-        double(x)
+    # Any floating input is cast to the buffers' dtype, as a drop-in layer should take it.
+    torch.testing.assert_close(double(x), double(x.double()), atol=0, rtol=0)
+    assert double(x).dtype == torch.float64
+    torch.testing.assert_close(module(x.double()), module(x), atol=0, rtol=0)
+    assert module(x.to(torch.bfloat16)).dtype == torch.float32
+    with pytest.raises(TypeError, match=r"x must have a floating dtype .* got torch\.uint8"):
+        module((x * 255).to(torch.uint8))
+
+
+@pytest.mark.parametrize("low", [torch.bfloat16, torch.float16])
+def test_autocast_and_low_precision_inputs(low: torch.dtype) -> None:
+    module = make_module(torch.float32)
+    x = random_views(3, torch.float32)
+    reference = module(x)
+    # A bfloat16 or float16 batch (what autocast's layers give) projects as its float32 cast.
+    torch.testing.assert_close(module(x.to(low)), module(x.to(low).float()), atol=0, rtol=0)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        z = module(x.to(low))
+    assert z.dtype == torch.bfloat16  # autocast runs the matrix product in its dtype
+    torch.testing.assert_close(z.float(), reference, atol=0.05, rtol=0.05)
+    back = module.reconstruct(reference.to(low))
+    assert back.dtype == torch.float32
 
 
 def test_state_dict_round_trip() -> None:
@@ -92,7 +112,7 @@ def test_state_dict_round_trip() -> None:
     torch.save(state, buffer)
     buffer.seek(0)
     loaded = torch.load(buffer, weights_only=True)
-    fresh = EigenProjection(torch.zeros(N_FEATURES), torch.zeros(K, N_FEATURES), torch.zeros(K))
+    fresh = EigenProjection.from_tensors(torch.zeros(N_FEATURES), torch.zeros(K, N_FEATURES), torch.zeros(K))
     assert fresh.image_shape is None
     fresh.load_state_dict(loaded)
     assert fresh.image_shape == IMAGE_SHAPE  # restored from the extra state
@@ -134,7 +154,7 @@ def test_repr_and_properties() -> None:
     module = make_module()
     assert module.in_features == N_FEATURES and module.n_components == K
     assert f"in_features={N_FEATURES}, n_components={K}, image_shape=(1, 4, 6)" in repr(module)
-    bare = EigenProjection(torch.zeros(3), torch.eye(3)[:2])
+    bare = EigenProjection.from_tensors(torch.zeros(3), torch.eye(3)[:2])
     assert repr(bare) == "EigenProjection(in_features=3, n_components=2)"
     assert bare.eigenvalues.shape == (0,)
     assert bare.reconstruct(torch.zeros(4, 2)).shape == (4, 3)
@@ -159,27 +179,27 @@ def test_wrong_input_shapes() -> None:
 def test_constructor_validation() -> None:
     mean, comps = torch.zeros(6), torch.eye(6)[:2]
     with pytest.raises(ValueError, match=r"mean must have shape \(6,\).*got \(5,\)"):
-        EigenProjection(torch.zeros(5), comps)
+        EigenProjection.from_tensors(torch.zeros(5), comps)
     with pytest.raises(ValueError, match=r"components must have shape \(k, N\)"):
-        EigenProjection(mean, torch.zeros(6))
+        EigenProjection.from_tensors(mean, torch.zeros(6))
     with pytest.raises(ValueError, match=r"eigenvalues must have shape \(2,\)"):
-        EigenProjection(mean, comps, torch.ones(3))
+        EigenProjection.from_tensors(mean, comps, torch.ones(3))
     with pytest.raises(TypeError, match=r"components must have dtype torch\.float32"):
-        EigenProjection(mean, comps.double())
+        EigenProjection.from_tensors(mean, comps.double())
     with pytest.raises(TypeError, match=r"mean must be a torch\.Tensor"):
-        EigenProjection([0.0] * 6, comps)  # type: ignore[arg-type]
+        EigenProjection.from_tensors([0.0] * 6, comps)  # type: ignore[arg-type]
     bad = comps.clone()
     bad[0, 0] = float("nan")
     with pytest.raises(ValueError, match="components must be finite"):
-        EigenProjection(mean, bad)
+        EigenProjection.from_tensors(mean, bad)
     with pytest.raises(
         ValueError, match=r"image_shape=\(1, 2, 2\) must be positive with C\*H\*W equal to the 6"
     ):
-        EigenProjection(mean, comps, image_shape=(1, 2, 2))
+        EigenProjection.from_tensors(mean, comps, image_shape=(1, 2, 2))
     with pytest.raises(TypeError, match="image_shape must be None or a"):
-        EigenProjection(mean, comps, image_shape=(6,))  # type: ignore[arg-type]
+        EigenProjection.from_tensors(mean, comps, image_shape=(6,))  # type: ignore[arg-type]
     # The layer copies its inputs.
-    module = EigenProjection(mean, comps)
+    module = EigenProjection.from_tensors(mean, comps)
     mean += 1.0
     assert float(module.mean.abs().sum()) == 0.0
 
@@ -244,12 +264,14 @@ def test_sizes_form_defaults_and_the_tensor_form() -> None:
     assert fresh.mean.shape == (N_FEATURES,) and fresh.components.shape == (K, N_FEATURES)
     assert repr(fresh) == f"EigenProjection(in_features={N_FEATURES}, n_components={K})"
     assert EigenProjection(N_FEATURES, K, dtype=torch.float64).components.dtype == torch.float64
-    # from_tensors and the positional tensor form build the same layer; dtype converts either.
+    # Tensors go to from_tensors; the constructor's old tensor form builds the same layer
+    # with a DeprecationWarning. dtype converts either.
     est, x = make_estimator(torch.float64)
     a = EigenProjection.from_tensors(est.mean_, est.components_, est.eigenvalues_, IMAGE_SHAPE)
-    b = EigenProjection(est.mean_, est.components_, est.eigenvalues_, IMAGE_SHAPE)
+    with pytest.warns(DeprecationWarning, match=r"EigenProjection\.from_tensors\(mean, components"):
+        b = EigenProjection(est.mean_, est.components_, est.eigenvalues_, IMAGE_SHAPE)
     torch.testing.assert_close(a(x), b(x), atol=0, rtol=0)
-    c = EigenProjection(est.mean_, est.components_, dtype=torch.float32)
+    c = EigenProjection.from_tensors(est.mean_, est.components_, dtype=torch.float32)
     assert c.mean.dtype == torch.float32 and est.mean_.dtype == torch.float64
 
 

@@ -33,7 +33,7 @@ def make_projection(
     q, _ = torch.linalg.qr(randn(N_FEATURES, K, seed=seed))
     mean = randn(N_FEATURES, seed=seed + 1)
     eigenvalues = torch.linspace(5.0, 1.0, K, dtype=torch.float64)
-    return EigenProjection(
+    return EigenProjection.from_tensors(
         mean.to(dtype),
         q.T.contiguous().to(dtype),
         eigenvalues.to(dtype),
@@ -232,8 +232,18 @@ def test_constructor_errors(change: dict[str, object], error: type[Exception], m
 
 def test_input_errors() -> None:
     rec = make_recognizer(torch.float64)
-    with pytest.raises(TypeError, match="dtype of the layer's buffers"):
-        rec(torch.zeros(2, *IMAGE_SHAPE, dtype=torch.float32))
+    with pytest.raises(TypeError, match="x must have a floating dtype"):
+        rec(torch.zeros(2, *IMAGE_SHAPE, dtype=torch.int64))
+    with pytest.raises(TypeError, match="x must have a floating dtype"):
+        rec.predict(torch.zeros(2, *IMAGE_SHAPE, dtype=torch.int64))
+    # Any floating dtype is cast to the recognizer's, by forward and predict alike.
+    x = randn(3, *IMAGE_SHAPE, seed=5, dtype=torch.float64)
+    expected = rec.predict(x)
+    for cast in (torch.float32, torch.bfloat16):
+        got = rec.predict(x.to(cast))
+        assert got.distances.dtype == torch.float64
+        torch.testing.assert_close(rec(x.to(cast))[0], got.labels)
+    torch.testing.assert_close(rec.predict(x.float()).labels, expected.labels)
     with pytest.raises(ValueError, match="x must have shape"):
         rec(torch.zeros(2, 5, dtype=torch.float64))
 
@@ -259,7 +269,7 @@ def circle_recognizer(
     """One object whose codes trace the unit circle (cos θ, sin θ) at poses 0, step, … < stop."""
     poses = torch.arange(0.0, stop, step, dtype=torch.float64)
     codes = torch.stack([torch.cos(torch.deg2rad(poses)), torch.sin(torch.deg2rad(poses))], dim=1)
-    projection = EigenProjection(torch.zeros(2, dtype=dtype), torch.eye(2, dtype=dtype))
+    projection = EigenProjection.from_tensors(torch.zeros(2, dtype=dtype), torch.eye(2, dtype=dtype))
     return NearestNeighborRecognizer(
         projection, codes.to(dtype), torch.zeros(len(poses), dtype=torch.long), poses.to(dtype)
     )

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from torch_eigview.apps.cli_args import HelpFormatter, add_quiet, add_threads
+from torch_eigview.apps.device_option import add_device_argument, resolve_device
 from torch_eigview.apps.prediction import escape
 from torch_eigview.apps.view_options import (
     add_manifest_arguments,
@@ -73,6 +74,7 @@ def add_evaluate_command(sub: argparse._SubParsersAction[argparse.ArgumentParser
         "accepted known views",
     )
     ev.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    add_device_argument(ev, "the projection and the search run")
     add_quiet(ev)
     add_threads(ev)
 
@@ -131,8 +133,10 @@ def _tests(
     prep: Preprocessing,
     dtype: torch.dtype,
     skipped: list[dict[str, str]],
+    device: torch.device,
 ) -> Iterator[tuple[str, int, torch.Tensor, torch.Tensor]]:
-    """Per known object its readable views (B, C, H, W) and true poses (B,), read lazily."""
+    """Per known object its readable views (B, C, H, W) and true poses (B,) on ``device``
+    (the recognizer's), read lazily."""
     import torch
 
     from torch_eigview.datasets.background import background_rule
@@ -159,7 +163,7 @@ def _tests(
                 _skip(skipped, str(exc))
         if images:
             truth = wrap_degrees(torch.tensor(poses, dtype=torch.float64)).to(dtype)
-            yield obj, table[obj], torch.stack(images), truth
+            yield obj, table[obj], torch.stack(images).to(device), truth.to(device)
 
 
 class _Rejections:
@@ -246,7 +250,9 @@ def evaluate(
         else:
             unknown[e.object] = unknown.get(e.object, 0) + 1
     rejections = _Rejections(recognizer) if reject else None
-    tests = _tests(groups, table, prep, recognizer.codes.dtype, skipped)  # one object in memory at a time
+    where = recognizer.codes.device  # the views go where the recognizer is (--device)
+    # One object in memory at a time.
+    tests = _tests(groups, table, prep, recognizer.codes.dtype, skipped, where)
     if rejections is not None:
         tests = rejections.watch(tests, known=True)
     first = next(tests, None)
@@ -262,7 +268,7 @@ def evaluate(
             if e.object not in table:
                 others.setdefault(e.object, []).append(e)
         for _ in rejections.watch(
-            _tests(others, dict.fromkeys(others, -1), prep, recognizer.codes.dtype, skipped), False
+            _tests(others, dict.fromkeys(others, -1), prep, recognizer.codes.dtype, skipped, where), False
         ):
             pass
     return Evaluation(
@@ -312,7 +318,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
     check_outputs([("--json", args.json)], inputs=[("--model", args.model), *manifest_inputs(args)])
     from torch_eigview.io.model import load_model
 
+    device = resolve_device(args.device)  # no CUDA: named before the model is read
     model = load_model(args.model)
+    model.recognizer.to(device)  # the projection and the search; evaluate moves the views there
     meta = model.metadata
     if args.reject and not model.recognizer.rejects:
         raise ValueError(

@@ -10,11 +10,11 @@ import itertools
 import math
 import numbers
 import warnings
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import torch
-from torch.utils.data import DataLoader, RandomSampler
+from torch.utils.data import DataLoader, Dataset, RandomSampler
 
 from torch_eigview.check import (
     VIEW_LIMIT,
@@ -75,6 +75,7 @@ class Params:
     workers: int = 0
     worker_kind: str = "thread"
     max_rank: int = 512
+    degree: int = 3
 
     def thetas(self, steps: list[float]) -> list[float]:
         """Gallery angles relative to the first seed, for seeds ``steps`` apart: with
@@ -336,6 +337,9 @@ def block_source(blocks: object) -> Callable[[], Iterable[object]]:
         raise TypeError("blocks must be an iterable of view blocks, got one tensor (wrap it in a list)")
     if callable(blocks) and not isinstance(blocks, Iterable):
         return blocks
+    if isinstance(blocks, Dataset) and hasattr(blocks, "__len__") and not isinstance(blocks, Iterable):
+        # A map-style Dataset (a ViewDataset): one item per block, read afresh each pass.
+        return lambda: (blocks[i] for i in range(len(blocks)))
     if not isinstance(blocks, Iterable):
         raise TypeError(
             f"blocks must be an iterable of view blocks or a callable returning one, got {type(blocks).__name__}"
@@ -346,10 +350,55 @@ def block_source(blocks: object) -> Callable[[], Iterable[object]]:
     return lambda: blocks
 
 
-def block_item(item: object, index: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(B, C, H, W) views, (B,) int64 labels and (B,) float64 poses of one block."""
+# The keys of a ViewDataset item (or of a DataLoader batch of them, default collate) that
+# fit_blocks reads: the views, the object's name (the label) and the azimuth (the pose).
+VIEW_ITEM_KEYS = ("image", "object", "azimuth")
+
+
+def _view_item_parts(item: Mapping[object, object], index: int, names: dict[str, int]) -> list[object]:
+    """A ViewDataset item (one view) or a collated batch of them → [views, labels, poses]."""
     what = f"blocks[{index}]"
-    parts = list(item) if isinstance(item, (tuple, list)) else [item]
+    if "image" not in item:
+        raise ValueError(
+            f"{what} is a dict without the key 'image': a dict block must be a ViewDataset item or a "
+            f"DataLoader batch of them, with keys {VIEW_ITEM_KEYS} (got keys {sorted(map(str, item))})"
+        )
+    views = check_float_tensor(item["image"], f"{what}['image']")
+    single = views.ndim == 3  # one ViewDataset item, (C, H, W)
+    parts: list[object] = [views[None] if single else views]
+    n = parts[0].shape[0]  # type: ignore[attr-defined]
+    if "object" in item:
+        objects = [item["object"]] if single or isinstance(item["object"], str) else item["object"]
+        if not isinstance(objects, Sequence) or not all(isinstance(o, str) for o in objects):
+            raise TypeError(
+                f"{what}['object'] must be the object's name (str), or a list of names for a batch, "
+                f"got {type(item['object']).__name__}"
+            )
+        # Names become labels 0, 1, … in order of first appearance; the caller keeps
+        # ``names`` across the blocks of a pass, so every block labels alike.
+        parts.append(torch.tensor([names.setdefault(o, len(names)) for o in objects], dtype=torch.int64))
+    else:
+        parts.append(torch.full((n,), index))  # as a bare tensor's views
+    if "azimuth" in item:
+        parts.append(torch.as_tensor(item["azimuth"], dtype=torch.float64).reshape(-1))
+    return parts
+
+
+def block_item(
+    item: object, index: int, names: dict[str, int] | None = None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(B, C, H, W) views, (B,) int64 labels and (B,) float64 poses of one block.
+
+    A block is views, ``(views, labels[, poses])``, or a dict as
+    :class:`~torch_eigview.datasets.ViewDataset` yields it (one view) or a ``DataLoader``
+    collates it (a batch): ``image`` gives the views, ``object`` the label (names are
+    numbered in ``names``, in order of first appearance) and ``azimuth`` the pose.
+    """
+    what = f"blocks[{index}]"
+    if isinstance(item, Mapping):
+        parts = _view_item_parts(item, index, {} if names is None else names)
+    else:
+        parts = list(item) if isinstance(item, (tuple, list)) else [item]
     if not 1 <= len(parts) <= 3:
         raise ValueError(
             f"{what} must be views, (views, labels) or (views, labels, poses), got {len(parts)} parts"

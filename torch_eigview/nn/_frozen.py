@@ -7,14 +7,19 @@ extra state, since they are not tensors), the ``eigenvalues`` buffer, the input 
 ``n_components`` and ``_project``.
 
 Both layers are built either from sizes, with zero buffers for ``load_state_dict`` to fill
-(as torchvision's ``FrozenBatchNorm2d``), or from tensors (``from_tensors``);
-:func:`is_size` tells the two call forms apart and :func:`check_sizes` checks the first.
+(as torchvision's ``FrozenBatchNorm2d``), or from tensors through the named classmethod
+``from_tensors``; :func:`is_size` tells the two call forms apart and :func:`check_sizes`
+checks the first. Tensors passed to the constructor itself still work, with a
+``DeprecationWarning`` (:func:`warn_tensor_form`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import numbers
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from contextvars import ContextVar
 from typing import Any, ClassVar
 
 import torch
@@ -35,8 +40,36 @@ __all__ = [
     "check_eigenvalues",
     "check_same_dtype",
     "check_sizes",
+    "from_tensors_call",
     "is_size",
+    "warn_tensor_form",
 ]
+
+# Set while a ``from_tensors`` classmethod builds its layer through the constructor.
+_FROM_TENSORS: ContextVar[bool] = ContextVar("torch_eigview_from_tensors", default=False)
+
+
+@contextlib.contextmanager
+def from_tensors_call() -> Iterator[None]:
+    """Within it, the constructor's tensor form is ``from_tensors``'s, not deprecated."""
+    token = _FROM_TENSORS.set(True)
+    try:
+        yield
+    finally:
+        _FROM_TENSORS.reset(token)
+
+
+def warn_tensor_form(cls: str, arguments: str) -> None:
+    """Warns that tensors were passed to the constructor ``cls(arguments)``, outside
+    :func:`from_tensors_call`: the constructor takes sizes, ``cls.from_tensors`` tensors."""
+    if not _FROM_TENSORS.get():
+        warnings.warn(
+            f"{cls}({arguments}) with tensors is deprecated: build the layer from tensors with "
+            f"{cls}.from_tensors({arguments}); the constructor takes sizes",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+
 
 # ``nn.Module`` saves ``get_extra_state()`` under ``prefix + "_extra_state"``.
 _EXTRA_STATE_KEY = "_extra_state"
@@ -141,21 +174,33 @@ class FrozenProjection(nn.Module):
         check_view_input(x, self.in_features, self.image_shape, self.eigenvalues.dtype)
 
     def prepare(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, ...) views → (B, N) vectors as the eigenspace sees them (flattened, unit norm if set)."""
+        """(B, ...) views → (B, N) vectors as the eigenspace sees them: in the buffers' dtype,
+        flattened, unit norm if set."""
+        dtype = self.eigenvalues.dtype
+        # A drop-in layer takes what the layers before it give: a float64 batch, or under
+        # autocast a bfloat16 or float16 one. The unit norm is taken in the buffers' dtype
+        # (a bfloat16 sum of squares keeps 3 digits); autocast still runs the matrix
+        # product in its own dtype. The cast is static (dtypes, not data), so an exported
+        # or compiled graph has a Cast node only where the dtypes differ.
+        if x.dtype != dtype:
+            x = x.to(dtype)
         return unit_rows(x) if self.unit_norm else x.flatten(1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Projects a batch of views onto the eigenspace.
 
         Args:
-            x: (B, C, H, W) or (B, N) views, with the buffers' dtype and device.
+            x: (B, C, H, W) or (B, N) views on the buffers' device, of any floating dtype:
+                they are cast to the buffers' dtype first (autocast bfloat16 or float16
+                batches and float64 ones work as they are).
 
         Returns:
-            (B, k) eigenspace coordinates. Differentiable with respect to ``x``.
+            (B, k) eigenspace coordinates in the buffers' dtype (under autocast, in
+            autocast's dtype). Differentiable with respect to ``x``.
 
         Raises:
             ValueError: ``x`` does not have one of the accepted shapes.
-            TypeError: ``x`` is not a tensor of the buffers' dtype.
+            TypeError: ``x`` is not a floating tensor (scale integer images to [0, 1] first).
         """
         self._check_views(x)
         return self._project(self.prepare(x))

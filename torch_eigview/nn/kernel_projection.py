@@ -30,7 +30,9 @@ from torch_eigview.nn._frozen import (
     check_eigenvalues,
     check_same_dtype,
     check_sizes,
+    from_tensors_call,
     is_size,
+    warn_tensor_form,
 )
 from torch_eigview.nn.functional import unit_rows
 
@@ -87,6 +89,7 @@ class KernelProjection(FrozenProjection):
     mean of k(x, V) minus the grand mean, times 1ᵀA) is zero and left out of the graph.
     For Nyström A = W^{-1/2}U maps the landmark features to their principal axes.
 
+    Inputs of any floating dtype are cast to the buffers' dtype, as in ``EigenProjection``.
     All tensors are persistent buffers; the kernel and its parameters are fixed at
     construction (saved in ``state_dict`` as extra state) and become constants of an
     exported graph. Only the named kernels are supported: a callable kernel could neither
@@ -95,7 +98,7 @@ class KernelProjection(FrozenProjection):
     Built from sizes (T, N, k), the buffers start as zeros for ``load_state_dict`` to fill,
     and the kernel, its parameters, ``image_shape`` and ``unit_norm`` come back from the
     saved extra state. :meth:`from_tensors` builds the layer from a fit's tensors; passing
-    them here in place of the sizes does the same.
+    them here in place of the sizes is deprecated (the same, with a ``DeprecationWarning``).
 
     Args:
         n_vectors: T, the number of stored views; or the (T, N) stored views V, N = C*H*W
@@ -176,6 +179,7 @@ class KernelProjection(FrozenProjection):
             t, n, k = check_sizes(sizes, eigenvalues)
             tensors = (torch.zeros(t, n), torch.zeros(t, k), torch.zeros(t))
         else:
+            warn_tensor_form("KernelProjection", "vectors, coefficients, kernel_mean, ...")
             values, names = (n_vectors, n_features, n_components), ("vectors", "coefficients", "kernel_mean")
             tensors = tuple(check_float_tensor(v, name) for v, name in zip(values, names, strict=True))
         self._register(tensors, eigenvalues)
@@ -199,7 +203,9 @@ class KernelProjection(FrozenProjection):
         Raises:
             TypeError, ValueError: as for the class.
         """
-        return cls(check_float_tensor(vectors, "vectors"), coefficients, kernel_mean, **options)
+        vectors = check_float_tensor(vectors, "vectors")
+        with from_tensors_call():
+            return cls(vectors, coefficients, kernel_mean, **options)
 
     def _register(self, tensors: tuple[torch.Tensor, ...], eigenvalues: torch.Tensor | None) -> None:
         """Checks (vectors, coefficients, kernel_mean) against each other and registers copies."""

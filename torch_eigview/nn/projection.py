@@ -17,7 +17,9 @@ from torch_eigview.nn._frozen import (
     check_eigenvalues,
     check_same_dtype,
     check_sizes,
+    from_tensors_call,
     is_size,
+    warn_tensor_form,
 )
 
 __all__ = ["EigenProjection"]
@@ -27,14 +29,16 @@ class EigenProjection(FrozenProjection):
     """Projects views onto a frozen eigenspace: ``z = (vec(x) - mean) @ components.T``.
 
     All state lives in persistent buffers (``mean``, ``components``, ``eigenvalues``);
-    the module has no parameters. Inputs must have the buffers' dtype: convert the module
-    with ``.to(dtype)`` or ``.double()`` rather than relying on implicit casts.
+    the module has no parameters. Inputs of any floating dtype are cast to the buffers'
+    dtype (float32 unless converted with ``.to(dtype)`` or ``.double()``), so the layer takes
+    autocast's bfloat16 or float16 batches, and float64 ones, as they come.
 
     Built from sizes, as torchvision's ``FrozenBatchNorm2d``, the buffers start as zeros
     (eigenvalues unknown) for ``load_state_dict`` to fill; the saved ``image_shape`` and
     ``unit_norm`` come back with them (extra state), and the saved eigenvalues may be (k,)
-    or unknown. :meth:`from_tensors` builds the layer from a fit's tensors; passing them here
-    in place of the sizes, ``EigenProjection(mean, components, ...)``, does the same.
+    or unknown. :meth:`from_tensors` builds the layer from a fit's tensors. Passing them here
+    in place of the sizes, ``EigenProjection(mean, components, ...)``, is deprecated: it does
+    the same with a ``DeprecationWarning``.
 
     Args:
         n_features: N = C*H*W, the number of values in one view (row-major flatten of
@@ -92,6 +96,7 @@ class EigenProjection(FrozenProjection):
                 )
             mean, components = torch.zeros(n), torch.zeros(k, n)
         else:
+            warn_tensor_form("EigenProjection", "mean, components, ...")
             mean = check_float_tensor(n_features, "mean")
             components = check_float_tensor(n_components, "components")
         self._register(mean, components, eigenvalues, image_shape)
@@ -105,6 +110,9 @@ class EigenProjection(FrozenProjection):
         eigenvalues: torch.Tensor | None = None,
         image_shape: tuple[int, int, int] | None = None,
         unit_norm: bool = False,
+        *,
+        dtype: torch.dtype | None = None,
+        device: torch.device | str | None = None,
     ) -> EigenProjection:
         """The layer holding copies of a fit's tensors.
 
@@ -112,12 +120,14 @@ class EigenProjection(FrozenProjection):
             mean: (N,) the mean view.
             components: (k, N) orthonormal eigenvectors, one per row, of ``mean``'s dtype.
             eigenvalues: optional (k,) eigenvalues (see the class).
-            image_shape, unit_norm: as for the class.
+            image_shape, unit_norm, dtype, device: as for the class.
 
         Raises:
             TypeError, ValueError: as for the class.
         """
-        return cls(check_float_tensor(mean, "mean"), components, eigenvalues, image_shape, unit_norm)
+        mean = check_float_tensor(mean, "mean")
+        with from_tensors_call():
+            return cls(mean, components, eigenvalues, image_shape, unit_norm, dtype=dtype, device=device)
 
     def _register(
         self,
@@ -165,21 +175,26 @@ class EigenProjection(FrozenProjection):
         """Maps eigenspace coordinates back to views: ``z @ components + mean``.
 
         Args:
-            z: (B, k) coordinates, with the buffers' dtype.
+            z: (B, k) coordinates of any floating dtype (cast to the buffers', as ``forward``
+                casts its views).
 
         Returns:
-            (B, C, H, W) when ``image_shape`` is known, else (B, N).
+            (B, C, H, W) when ``image_shape`` is known, else (B, N), in the buffers' dtype.
 
         Raises:
             ValueError: ``z`` is not (B, k).
-            TypeError: ``z`` is not a tensor of the buffers' dtype.
+            TypeError: ``z`` is not a floating tensor.
         """
         if not isinstance(z, torch.Tensor):
             raise TypeError(f"z must be a torch.Tensor, got {type(z).__name__}")
         if z.ndim != 2 or z.shape[1] != self.n_components:
             raise ValueError(f"z must have shape (B, {self.n_components}), got shape {tuple(z.shape)}")
+        if not z.dtype.is_floating_point:
+            raise TypeError(
+                f"z must have a floating dtype (cast to the buffers' {self.mean.dtype}), got {z.dtype}"
+            )
         if z.dtype != self.mean.dtype:
-            raise TypeError(f"z must have the dtype of the buffers ({self.mean.dtype}), got {z.dtype}")
+            z = z.to(self.mean.dtype)
         views = z @ self.components + self.mean
         if self.image_shape is None:
             return views

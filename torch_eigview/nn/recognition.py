@@ -131,6 +131,13 @@ class NearestNeighborRecognizer(nn.Module):
             raise ValueError(
                 f"label_names must name the {n_distinct} distinct labels, got {len(label_names)} names"
             )
+        if label_names is not None and len({str(n) for n in label_names}) != len(label_names):
+            # Two labels of one name would score one object's views as the other's.
+            texts = [str(n) for n in label_names]
+            repeated = sorted({n for n in texts if texts.count(n) > 1})
+            raise ValueError(
+                f"label_names must be distinct, one per label, got {repeated[:5]!r} more than once"
+            )
         self.projection = projection
         self.label_names = None if label_names is None else [str(n) for n in label_names]
         codes = codes.detach().to(reference)
@@ -203,7 +210,8 @@ class NearestNeighborRecognizer(nn.Module):
         error. Callers with untrusted data use :meth:`predict`, which checks.
 
         Args:
-            x: (B, C, H, W) or (B, N) views (the projection's dtype and size).
+            x: (B, C, H, W) or (B, N) views (the projection's size; any floating dtype,
+                cast to the projection's).
 
         Returns:
             ``(labels, poses, distances)``, each (B,).
@@ -227,7 +235,8 @@ class NearestNeighborRecognizer(nn.Module):
         """The two scores rejection compares with its thresholds, unchecked as ``forward``.
 
         Args:
-            x: (B, C, H, W) or (B, N) views (the projection's dtype and size).
+            x: (B, C, H, W) or (B, N) views (the projection's size; any floating dtype,
+                cast to the projection's).
 
         Returns:
             ``(dffs, difs)``, each (B,): the L2 distance of the prepared view (flattened,
@@ -260,15 +269,16 @@ class NearestNeighborRecognizer(nn.Module):
         views whose L2 norm does not overflow the dtype (they would project to zeros).
 
         Args:
-            x: (B, C, H, W) or (B, N) views (the projection's dtype and size); B may be 0.
+            x: (B, C, H, W) or (B, N) views (the projection's size; any floating dtype,
+                cast to the projection's); B may be 0.
             interpolate_pose: refine each pose between the nearest gallery view and its
                 neighbours in pose order (:meth:`interpolate_poses`); else the nearest
                 view's pose, as ``forward`` (and the ONNX graph) give it.
             reject: fill ``known`` by the rejection thresholds (:meth:`rejection_scores`).
 
         Raises:
-            TypeError: ``x`` is not a float tensor (or not of the layer's dtype), or
-                ``interpolate_pose`` or ``reject`` is not a bool.
+            TypeError: ``x`` is not a floating tensor (any floating dtype is cast to the
+                layer's, as ``forward`` does), or ``interpolate_pose`` or ``reject`` is not a bool.
             ValueError: a bad shape, NaN or infinite values,
                 non-finite distances (a damaged gallery), or ``reject`` without thresholds.
         """
@@ -290,8 +300,8 @@ class NearestNeighborRecognizer(nn.Module):
         if not bool(torch.isfinite(distances).all()):
             raise ValueError(
                 "the recognizer gave non-finite distances for finite views: the views' values (largest "
-                f"magnitude {float(x.abs().max()):.3g}) overflow {x.dtype} in the projection, or the gallery "
-                "or projection is damaged"
+                f"magnitude {float(x.abs().max()):.3g}) overflow {self.codes.dtype} in the projection, or the "
+                "gallery or projection is damaged"
             )
         with torch.no_grad():
             if interpolate_pose:
