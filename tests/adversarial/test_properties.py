@@ -99,7 +99,7 @@ def test_eigenspace_fit_and_transform(x: torch.Tensor, k: object) -> None:
 @given(x=tensors(), k=st.integers(1, 3), method=st.sampled_from(["exact", "randomized"]), seed=anything)
 def test_streaming_fit(x: torch.Tensor, k: int, method: str, seed: object) -> None:
     holds(
-        lambda: StreamingEigenspace(k, method=method, seed=seed).fit(x).components_,
+        lambda: StreamingEigenspace(k, solver=method, seed=seed).fit(x).components_,
         ["blocks", "seed", "n_components", "views"],
     )  # type: ignore[arg-type]
 

@@ -20,7 +20,7 @@ from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 from torch_eigview.io.checkpoint import load_recognizer
 from torch_eigview.io.preprocessing import Preprocessing
 
-from tests.helpers import run_cli
+from tests.helpers import rendered_turntable, run_cli
 
 SIDE = 32
 PREDICT_NO_TORCH = (
@@ -45,14 +45,7 @@ def _write(path: Path, rows: list[str]) -> Path:
 @pytest.fixture(scope="module")
 def views(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Two rendered objects every 10 degrees over -40..40, as PNGs listed in views.csv."""
-    root = tmp_path_factory.mktemp("views")
-    rows = ["path,object,azimuth"]
-    for name in ("egg", "head"):
-        images = render_views(make_object(name, seed=1), AZIMUTHS, OrthographicCamera(SIDE))
-        for az, image in zip(AZIMUTHS, images, strict=True):
-            _png(root / name / f"{az % 360}.png", image)
-            rows.append(f"{name}/{az % 360}.png,{name},{az}")
-    return _write(root / "views.csv", rows)
+    return rendered_turntable(tmp_path_factory.mktemp("views"), AZIMUTHS, SIDE)
 
 
 def _fit_args(views: Path, out: Path, *extra: str) -> list[str]:

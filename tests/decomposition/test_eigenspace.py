@@ -213,15 +213,21 @@ def test_fit_errors() -> None:
     ],
 )
 def test_bad_n_components(value: object, error: type[Exception], match: str) -> None:
+    est = Eigenspace(value)  # type: ignore[arg-type]  # stored as given, checked by fit
+    assert est.n_components is value
     with pytest.raises(error, match=match):
-        Eigenspace(value)  # type: ignore[arg-type]
+        est.fit(make_views(6, 4))
 
 
 def test_bad_solver() -> None:
     with pytest.raises(ValueError, match="solver='eig' must be one of"):
-        Eigenspace(2, solver="eig")
+        Eigenspace(2, solver="eig").fit(make_views(6, 4))
     with pytest.raises(TypeError, match="solver must be a str"):
-        Eigenspace(2, solver=1)  # type: ignore[arg-type]
+        Eigenspace(2, solver=1).fit_transform(make_views(6, 4))  # type: ignore[arg-type]
+    est = Eigenspace(2)
+    est.solver = "eig"  # set after construction: fit checks it the same way
+    with pytest.raises(ValueError, match="solver='eig' must be one of"):
+        est.fit(make_views(6, 4))
 
 
 def test_transform_errors() -> None:
@@ -262,6 +268,6 @@ def test_identical_views_are_a_clear_error_for_every_k(value: float, k: float) -
     from torch_eigview.decomposition.streaming import StreamingEigenspace
 
     x = torch.full((300, 1, 16, 16), value)
-    for space in (Eigenspace(k), StreamingEigenspace(k), StreamingEigenspace(k, method="randomized")):
+    for space in (Eigenspace(k), StreamingEigenspace(k), StreamingEigenspace(k, solver="randomized")):
         with pytest.raises(ValueError, match="rank 0 after centring"):
             space.fit(x)

@@ -54,9 +54,18 @@ def test_inverse_transform_nan() -> None:
         es.inverse_transform(torch.full((1, 3), float("inf"), dtype=torch.float64))
 
 
-def test_streaming_seed_checked_at_init() -> None:
+def test_streaming_seed_checked_before_the_first_pass() -> None:
+    passes = []
+
+    def source() -> list[torch.Tensor]:
+        passes.append(1)
+        return [rand(4, 6)]
+
+    est = StreamingEigenspace(3, solver="randomized", seed="x")  # type: ignore[arg-type]
+    assert est.seed == "x"  # stored as given
     with pytest.raises(TypeError, match="seed must be an integer, got str 'x'"):
-        StreamingEigenspace(3, method="randomized", seed="x")  # type: ignore[arg-type]
+        est.fit(source)
+    assert not passes  # not when the randomized solver draws its test matrix
 
 
 @pytest.mark.parametrize("method", ["exact", "randomized"])
@@ -77,7 +86,7 @@ def test_source_whose_values_change_between_passes(method: str, change: object) 
         return (y[i : i + 10] for i in range(0, 30, 10))
 
     with pytest.raises(ValueError, match=r"not re-generable: blocks\[\d\] changed between passes"):
-        StreamingEigenspace(4, method=method).fit(source)
+        StreamingEigenspace(4, solver=method).fit(source)
 
 
 def test_unchanged_source_still_fits() -> None:

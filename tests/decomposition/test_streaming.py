@@ -86,7 +86,7 @@ def test_energy_fraction_and_images() -> None:
 def test_randomized_close_to_exact(shape: tuple[int, int]) -> None:
     x = make_views(*shape)
     ref = Eigenspace(6).fit(x)
-    space = StreamingEigenspace(6, method="randomized", n_iter=3).fit(blocks_of(x, 16))
+    space = StreamingEigenspace(6, solver="randomized", n_iter=3).fit(blocks_of(x, 16))
     assert max_angle(space.components_, ref.components_) < 1e-4
     torch.testing.assert_close(space.eigenvalues_, ref.eigenvalues_, rtol=1e-6, atol=0)
     assert space.n_passes_ == 6
@@ -150,7 +150,7 @@ def test_non_finite_on_a_later_pass_raises(method: str, bad_pass: int) -> None:
         return (y[i : i + 10] for i in range(0, 30, 10))
 
     with pytest.raises(ValueError, match="non-finite values on a later pass"):
-        StreamingEigenspace(4, method=method).fit(source)
+        StreamingEigenspace(4, solver=method).fit(source)
 
 
 def test_bad_blocks() -> None:
@@ -179,11 +179,26 @@ def test_bad_blocks() -> None:
 
 
 def test_bad_arguments() -> None:
-    with pytest.raises(ValueError, match="method="):
-        StreamingEigenspace(4, method="svd")
+    x = torch.rand(8, 5, dtype=torch.float64)
+    with pytest.raises(ValueError, match="solver='svd' must be one of"):
+        StreamingEigenspace(4, solver="svd").fit(blocks_of(x, 4))
     with pytest.raises(ValueError, match="max_views=0"):
-        StreamingEigenspace(4, max_views=0)
+        StreamingEigenspace(4, max_views=0).fit(blocks_of(x, 4))
     with pytest.raises(TypeError, match="n_iter must be an int"):
-        StreamingEigenspace(4, n_iter=1.5)  # type: ignore[arg-type]
+        StreamingEigenspace(4, n_iter=1.5).fit_transform(blocks_of(x, 4))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="block_size=0"):
         blocks_of(torch.zeros(3, 3), 0)
+
+
+def test_method_is_the_deprecated_name_of_solver() -> None:
+    x = torch.rand(8, 5, dtype=torch.float64)
+    with pytest.warns(DeprecationWarning, match="give solver="):
+        old = StreamingEigenspace(3, method="randomized")
+    assert old.solver == "randomized"
+    old.fit(blocks_of(x, 4))
+    with pytest.warns(DeprecationWarning, match="read solver_"):
+        assert old.method_ == old.solver_ == "randomized"
+    with pytest.warns(DeprecationWarning, match="read solver"):
+        assert old.method == "randomized"
+    with pytest.raises(TypeError, match="not both"), pytest.warns(DeprecationWarning):
+        StreamingEigenspace(3, solver="auto", method="exact")

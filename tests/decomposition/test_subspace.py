@@ -163,7 +163,7 @@ def test_streaming_subspace_matches_the_explicit_fit(monkeypatch: pytest.MonkeyP
     calls = _spy(monkeypatch)
     x = make_views(410, 500)
     blocks = list(x.split(41))
-    got = StreamingEigenspace(8, method="subspace").fit(blocks)
+    got = StreamingEigenspace(8, solver="subspace").fit(blocks)
     want = Eigenspace(8, solver="gram").fit(x)
     torch.testing.assert_close(got.components_, want.components_, atol=1e-8, rtol=0)
     torch.testing.assert_close(got.eigenvalues_, want.eigenvalues_, atol=0, rtol=1e-10)
@@ -172,29 +172,29 @@ def test_streaming_subspace_matches_the_explicit_fit(monkeypatch: pytest.MonkeyP
     )
     torch.testing.assert_close(got.mean_, want.mean_)
     assert calls == [1] and got.n_passes_ >= 3  # the mean, then at least two iterations
-    assert got.method_ == "subspace"
+    assert got.solver_ == "subspace"
     monkeypatch.setattr(eigenspace, "SUBSPACE_MIN", 60)
-    assert StreamingEigenspace(8).fit(blocks).method_ == "exact"  # the default
+    assert StreamingEigenspace(8).fit(blocks).solver_ == "exact"  # the default
     assert calls == [1]
-    StreamingEigenspace(8, method="auto").fit(blocks)
+    StreamingEigenspace(8, solver="auto").fit(blocks)
     assert calls == [1, 1]
-    StreamingEigenspace(0.9, method="auto").fit(blocks)
+    StreamingEigenspace(0.9, solver="auto").fit(blocks)
     assert calls == [1, 1]
-    with pytest.raises(ValueError, match="method='subspace' needs an int n_components"):
-        StreamingEigenspace(0.9, method="subspace").fit(blocks)
-    assert StreamingEigenspace(0.9, method="auto").fit(blocks).method_ == "exact"
-    assert StreamingEigenspace(8, method="randomized").fit(blocks).method_ == "randomized"
-    assert StreamingEigenspace(8).method_ is None and Eigenspace(8).solver_ is None
+    with pytest.raises(ValueError, match="solver='subspace' needs an int n_components"):
+        StreamingEigenspace(0.9, solver="subspace").fit(blocks)
+    assert StreamingEigenspace(0.9, solver="auto").fit(blocks).solver_ == "exact"
+    assert StreamingEigenspace(8, solver="randomized").fit(blocks).solver_ == "randomized"
+    assert StreamingEigenspace(8).solver_ is None and Eigenspace(8).solver_ is None
 
 
 def test_streaming_falls_back_to_the_exact_passes(monkeypatch: pytest.MonkeyPatch) -> None:
     _spy(monkeypatch, result="none")
     x = make_views(410, 500)
-    got = StreamingEigenspace(8, method="subspace").fit(list(x.split(41)))
-    want = StreamingEigenspace(8, method="exact").fit(list(x.split(41)))
+    got = StreamingEigenspace(8, solver="subspace").fit(list(x.split(41)))
+    want = StreamingEigenspace(8, solver="exact").fit(list(x.split(41)))
     assert torch.equal(got.components_, want.components_)
     assert got.n_passes_ == want.n_passes_  # the spy gave up before its first pass
-    assert got.method_ == want.method_ == "exact"
+    assert got.solver_ == want.solver_ == "exact"
 
 
 @pytest.mark.slow
@@ -221,9 +221,9 @@ def test_streaming_fallback_counts_the_passes(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.setattr(subspace, "iteration_budget", lambda *_: 5)
     gen = torch.Generator().manual_seed(1)
     x = torch.randn(410, 500, generator=gen, dtype=torch.float64)
-    got = StreamingEigenspace(8, method="subspace").fit(list(x.split(41)))
-    want = StreamingEigenspace(8, method="exact").fit(list(x.split(41)))
-    assert got.method_ == "exact" and want.n_passes_ == 3
+    got = StreamingEigenspace(8, solver="subspace").fit(list(x.split(41)))
+    want = StreamingEigenspace(8, solver="exact").fit(list(x.split(41)))
+    assert got.solver_ == "exact" and want.n_passes_ == 3
     assert got.n_passes_ == 1 + 3 + (want.n_passes_ - 1)
     assert torch.equal(got.components_, want.components_)
 
@@ -261,8 +261,8 @@ def test_oversample_auto_is_each_methods_own(monkeypatch: pytest.MonkeyPatch) ->
     assert _largest_angle(auto.components_, narrow.components_) < 1e-8
     blocks = list(x.split(41))
     for method, width in (("subspace", SUBSPACE_OVERSAMPLE), ("randomized", RANDOMIZED_OVERSAMPLE)):
-        a = StreamingEigenspace(8, method=method).fit(blocks)
-        b = StreamingEigenspace(8, method=method, oversample=width).fit(blocks)
+        a = StreamingEigenspace(8, solver=method).fit(blocks)
+        b = StreamingEigenspace(8, solver=method, oversample=width).fit(blocks)
         assert torch.equal(a.components_, b.components_), method
     assert repr(Eigenspace(8, oversample=4)) == "Eigenspace(n_components=8, solver='auto', oversample=4)"
 
@@ -277,10 +277,11 @@ def test_oversample_auto_is_each_methods_own(monkeypatch: pytest.MonkeyPatch) ->
     ],
 )
 def test_oversample_errors(value: object, error: type[Exception], match: str) -> None:
+    x = make_views(12, 8)
     with pytest.raises(error, match=match):
-        Eigenspace(5, oversample=value)  # type: ignore[arg-type]
+        Eigenspace(5, oversample=value).fit(x)  # type: ignore[arg-type]
     with pytest.raises(error, match=match):
-        StreamingEigenspace(5, oversample=value)  # type: ignore[arg-type]
+        StreamingEigenspace(5, oversample=value).fit(x)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("method", ["exact", "subspace"])
@@ -293,9 +294,9 @@ def test_streamed_chunks_do_not_change_the_fit(monkeypatch: pytest.MonkeyPatch, 
     _spy(monkeypatch)
     x = make_views(410, 500)
     blocks = list(x.split(41))
-    want = StreamingEigenspace(8, method=method, max_views=100).fit(blocks)
+    want = StreamingEigenspace(8, solver=method, max_views=100).fit(blocks)
     monkeypatch.setattr(_tuning, "CHUNK_VIEWS", 1)
-    got = StreamingEigenspace(8, method=method, max_views=100).fit(blocks)
-    assert got.method_ == want.method_ == method
+    got = StreamingEigenspace(8, solver=method, max_views=100).fit(blocks)
+    assert got.solver_ == want.solver_ == method
     torch.testing.assert_close(got.components_, want.components_, atol=1e-10, rtol=0)
     torch.testing.assert_close(got.eigenvalues_, want.eigenvalues_, atol=0, rtol=1e-12)

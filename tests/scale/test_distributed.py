@@ -50,7 +50,7 @@ def _worker(rank: int, world: int, port: int, out: str) -> None:
     try:
         exact = fit_distributed(_shard(rank), K)
         results["exact"] = (exact.mean_, exact.components_, exact.eigenvalues_, exact.n_samples_)
-        rand = fit_distributed(_shard(rank), K, method="randomized", n_iter=3, seed=1)
+        rand = fit_distributed(_shard(rank), K, solver="randomized", n_iter=3, seed=1)
         results["randomized"] = (rand.components_, rand.eigenvalues_)
         for case, views in (
             ("empty", _shard(rank) if rank == 0 else torch.empty(0, 300, dtype=torch.float64)),
@@ -106,7 +106,7 @@ def test_exact_equals_single_process(ranks: list[dict[str, object]]) -> None:
 
 @pytest.mark.slow
 def test_randomized_equals_streaming(ranks: list[dict[str, object]]) -> None:
-    ref = StreamingEigenspace(K, method="randomized", n_iter=3, seed=1).fit(_data())
+    ref = StreamingEigenspace(K, solver="randomized", n_iter=3, seed=1).fit(_data())
     exact = Eigenspace(K).fit(_data())
     for result in ranks:
         components, eigvals = result["randomized"]  # type: ignore[misc]

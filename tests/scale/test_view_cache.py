@@ -52,7 +52,7 @@ def test_streaming_fit_from_the_cache_equals_explicit_fit() -> None:
     with ViewCache() as cache:
         for b in blocks:
             cache.append(b)
-        stream = StreamingEigenspace(4, method="exact", max_views=6).fit(cache)
+        stream = StreamingEigenspace(4, solver="exact", max_views=6).fit(cache)
     ref = Eigenspace(4).fit(torch.cat(blocks).flatten(1))
     torch.testing.assert_close(stream.mean_, ref.mean_, rtol=0, atol=1e-6)
     torch.testing.assert_close(stream.eigenvalues_, ref.eigenvalues_, rtol=1e-4, atol=1e-6)

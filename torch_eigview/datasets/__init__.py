@@ -30,6 +30,7 @@ from torch_eigview.datasets.image_views import ViewDataset, read_view
 from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
 from torch_eigview.datasets.renderer import Render, render, render_views
 from torch_eigview.datasets.scene import MASKS, SyntheticScene
+from torch_eigview.datasets.seed_views import SeedViews, read_images, read_seed_views
 from torch_eigview.datasets.shapes import SHAPES, SyntheticObject, make_object
 
 __all__ = [
@@ -45,6 +46,7 @@ __all__ = [
     "PerspectiveCamera",
     "PoseStepWarning",
     "Render",
+    "SeedViews",
     "SyntheticObject",
     "SyntheticScene",
     "ViewCorrespondence",
@@ -59,6 +61,8 @@ __all__ = [
     "make_camera",
     "make_object",
     "parse_object_spec",
+    "read_images",
+    "read_seed_views",
     "read_view",
     "render",
     "render_views",

@@ -7,7 +7,9 @@ and ``eigview predict`` do, so a COIL view is the same tensor whichever way it i
 
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -21,9 +23,70 @@ from torch_eigview.check import SIDE_LIMIT, check_int, check_limit
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.manifest import ViewManifest
 from torch_eigview.io.foreground import LUMA_WEIGHTS, colour_in_channels
-from torch_eigview.io.images import read_image, to_unit_float
+from torch_eigview.io.images import image_size, read_image, to_unit_float
 
-__all__ = ["ViewDataset", "read_view"]
+__all__ = [
+    "ASPECT_TOLERANCE",
+    "MASK_BORDER_ERROR",
+    "MASK_BORDER_WARNING",
+    "ViewDataset",
+    "read_view",
+    "warn_aspect_changes",
+]
+
+
+# An object seen on a turntable sits inside the frame: a mask that marks most of the image
+# border as object is far more likely inverted (zero on the object) than right. Past
+# MASK_BORDER_ERROR of the border the mask is refused; past MASK_BORDER_WARNING it is used
+# with a warning (an object cut by the frame can reach the border, rarely half of it).
+MASK_BORDER_ERROR = 0.9
+MASK_BORDER_WARNING = 0.5
+# Resizing views whose aspect ratios differ by more than this (relative) squeezes some
+# objects and not others; a camera's own ratio, shared by all views, is harmless.
+ASPECT_TOLERANCE = 0.02
+
+
+def _check_mask_border(found: np.ndarray, what: str) -> None:
+    """Refuses (or warns about) a (1, H, W) mask that marks most of the image border as object."""
+    plane = found[0]
+    if min(plane.shape) < 3:
+        return
+    ring = np.concatenate([plane[0], plane[-1], plane[1:-1, 0], plane[1:-1, -1]])
+    frac = float(ring.mean())
+    hint = "is it inverted? non-zero pixels mark the object, zero pixels the background"
+    if frac >= MASK_BORDER_ERROR:
+        raise ValueError(f"{what} marks {frac:.0%} of the image border as object: {hint}")
+    if frac >= MASK_BORDER_WARNING:
+        warnings.warn(
+            f"{what} marks {frac:.0%} of the image border as object: {hint}", UserWarning, stacklevel=3
+        )
+
+
+def warn_aspect_changes(
+    paths: Sequence[str | os.PathLike[str]], sources: Sequence[str] | None = None
+) -> None:
+    """Warns, naming the file and both sizes, for each image whose aspect ratio (H/W, read
+    from its header) differs from the first image's by more than :data:`ASPECT_TOLERANCE`:
+    resized to one size, such a view would be squeezed where the others are not.
+
+    Example:
+        >>> warn_aspect_changes([])  # nothing to compare
+    """
+    sizes = [image_size(p) for p in paths]
+    if not sizes or sizes[0] is None:
+        return
+    h0, w0 = sizes[0]
+    for i, hw in enumerate(sizes[1:], start=1):
+        if hw is None or min(hw) == 0 or min(h0, w0) == 0:
+            continue
+        if abs(math.log((hw[0] / hw[1]) / (h0 / w0))) > math.log1p(ASPECT_TOLERANCE):
+            where = f"{sources[i]}: " if sources is not None else ""
+            warnings.warn(
+                f"{where}image {os.fspath(paths[i])} is {hw[0]} x {hw[1]} (H x W), another aspect ratio than "
+                f"the first image {os.fspath(paths[0])} ({h0} x {w0}): resized to one size it is squeezed",
+                UserWarning,
+                stacklevel=2,
+            )
 
 
 def _check_size(size: object) -> tuple[int, int] | None:
@@ -186,15 +249,19 @@ def read_view(
         arr = read_image(path, keep_alpha=True)
         alpha = arr[-1:] if arr.shape[0] in (2, 4) else None
         colour = arr[:-1] if alpha is not None else arr
+        if alpha is not None and mask is None and bool((alpha > 0).all()):
+            alpha = None  # an opaque alpha channel marks no background: no mask
         if mask is not None:
-            found = read_image(mask, what="mask").any(axis=0, keepdims=True)
+            found = np.asarray(read_image(mask, what="mask").any(axis=0, keepdims=True))
             if found.shape[1:] != colour.shape[1:]:
                 raise ValueError(
                     f"mask {mask} has size (H, W)={found.shape[1:]}, its image {path} "
                     f"{colour.shape[1:]}: they must match"
                 )
+            _check_mask_border(found, f"mask {mask}")
         elif alpha is not None:
-            found = alpha > 0
+            found = np.asarray(alpha > 0)
+            _check_mask_border(found, f"the alpha channel of {path}")
         else:
             found = np.ones((1, *colour.shape[1:]), dtype=bool)
     except ValueError as exc:

@@ -80,6 +80,10 @@ E = TypeVar("E", bound="FittedEigenspace")
 class FittedEstimator(Generic[FitT]):
     """Holds a fit record (None until fitted) and reads the attributes every estimator has.
 
+    Constructor arguments are stored as given and validated when a fit starts
+    (:meth:`_validate_params`), as scikit-learn's estimators do: ``set_params`` or an
+    attribute set after construction is checked the same way.
+
     Args:
         n_components: k as an int >= 1, or an energy fraction in (0, 1).
     """
@@ -87,8 +91,16 @@ class FittedEstimator(Generic[FitT]):
     _FIT_CALLS: ClassVar[str] = "fit"  # named by the not-fitted error
 
     def __init__(self, n_components: int | float = 15) -> None:
-        self.n_components = check_n_components(n_components)
+        self.n_components = n_components
         self._state: FitT | None = None
+
+    def _validate_params(self) -> None:
+        """Checks the constructor's arguments; every fit calls it before it reads any view.
+
+        Raises:
+            TypeError, ValueError: a bad argument; the message names it.
+        """
+        self.n_components = check_n_components(self.n_components)  # an integral k becomes an int
 
     def _fitted(self, what: str) -> FitT:
         if self._state is None:
@@ -162,6 +174,7 @@ class FittedEigenspace(FittedEstimator[EigenFit]):
         if not isinstance(fit, EigenFit):
             raise TypeError(f"fit must be an EigenFit, got {type(fit).__name__}")
         estimator = cls(fit.n_components if n_components is None else n_components)
+        estimator._validate_params()
         estimator._state = fit
         return estimator
 
@@ -229,13 +242,17 @@ class FittedEigenspace(FittedEstimator[EigenFit]):
         return z @ fit.components + fit.mean
 
     def to_module(
-        self, unit_norm: bool = False, image_shape: tuple[int, int, int] | None = None
+        self, unit_norm: bool | None = None, image_shape: tuple[int, int, int] | None = None
     ) -> EigenProjection:
         """Returns the frozen ``EigenProjection`` (copies of mean, components, eigenvalues).
 
         Args:
-            unit_norm: the module divides each input view by its L2 norm first (fit on
-                unit-norm views then), as :meth:`KernelEigenspace.to_module`.
+            unit_norm: whether the module divides each input view by its L2 norm first.
+                None (the default) means as fitted, the rule every ``to_module`` follows:
+                the layer does to its input what the fit did to its views. This estimator
+                fits the rows as given, so None is False; pass True when the rows given to
+                ``fit`` were unit-norm (e.g. ``unit_rows(views)``) and the layer should
+                normalize raw views the same way.
             image_shape: ``(C, H, W)`` of the views, for a fit on flattened (P, N) views;
                 default the fitted one.
 
@@ -244,4 +261,5 @@ class FittedEigenspace(FittedEstimator[EigenFit]):
         """
         fit = self._fitted("to_module")
         shape = fit.image_shape if image_shape is None else image_shape
-        return EigenProjection(fit.mean, fit.components, fit.eigenvalues, shape, unit_norm=unit_norm)
+        unit = False if unit_norm is None else unit_norm  # as fitted: the rows as given
+        return EigenProjection.from_tensors(fit.mean, fit.components, fit.eigenvalues, shape, unit_norm=unit)

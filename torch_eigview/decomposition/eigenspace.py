@@ -131,11 +131,13 @@ class Eigenspace(FittedEigenspace):
             (35). A wider block converges in fewer iterations, each reading the views
             twice. The other solvers do not use it.
 
+    The arguments are stored as given and checked when a fit starts (scikit-learn's habit).
+
     Raises:
-        TypeError: ``n_components`` is not a number (bool included), ``solver`` not a str
-            or ``oversample`` neither "auto" nor an int.
-        ValueError: ``n_components``, ``solver`` or ``oversample`` is out of range; at fit,
-            "subspace" with a fractional ``n_components``.
+        TypeError: at fit, ``n_components`` is not a number (bool included), ``solver`` not
+            a str or ``oversample`` neither "auto" nor an int.
+        ValueError: at fit, ``n_components``, ``solver`` or ``oversample`` is out of range,
+            or "subspace" with a fractional ``n_components``.
 
     Example:
         >>> X = torch.randn(20, 64, dtype=torch.float64)
@@ -149,9 +151,14 @@ class Eigenspace(FittedEigenspace):
         self, n_components: int | float = 15, *, solver: str = "auto", oversample: int | str = "auto"
     ) -> None:
         super().__init__(n_components)
-        self.solver = check_choice(solver, "solver", _SOLVERS)
-        self.oversample = check_oversample(oversample)
+        self.solver = solver
+        self.oversample = oversample
         self.solver_: str | None = None  # None until a fit here (or a fit from elsewhere)
+
+    def _validate_params(self) -> None:
+        super()._validate_params()
+        check_choice(self.solver, "solver", _SOLVERS)
+        check_oversample(self.oversample)
 
     def __repr__(self) -> str:
         # scikit-learn's way: the parameters always shown, and oversample where it is set.
@@ -172,6 +179,7 @@ class Eigenspace(FittedEigenspace):
             ValueError: bad shape, P < 2, non-finite values, or an int ``n_components``
                 larger than the rank of the centred views.
         """
+        self._validate_params()
         x, image_shape = views_to_fit(X)
         with torch.no_grad():
             self._fit_views(x, image_shape, "X")
@@ -179,6 +187,7 @@ class Eigenspace(FittedEigenspace):
 
     def fit_transform(self, X: torch.Tensor) -> torch.Tensor:
         """Fits on ``X`` (P, N) or (P, C, H, W) and returns its (P, k) coordinates."""
+        self._validate_params()
         x, image_shape = views_to_fit(X)
         with torch.no_grad():
             xc = self._fit_views(x, image_shape, "X")
@@ -212,6 +221,7 @@ class Eigenspace(FittedEigenspace):
             ValueError: the inner sizes differ, P < 2, non-finite values, a bad
                 ``image_shape`` or ``block_size``, or ``n_components`` exceeds the rank.
         """
+        self._validate_params()
         _check_sparse(G, "G", "(N, M)")
         _check_sparse(C, "C", "(M, P)")
         if C.dtype != G.dtype:

@@ -196,22 +196,45 @@ class IncrementalEigenspace(FittedEigenspace):
                 f"other must hold views of N={self._mean.shape[0]} values of {self._dtype}, got "
                 f"N={other._mean.shape[0]} of {other._dtype}"
             )
+        # In float64 whatever the data's dtype: a model's rows diag(√s) Uᵀ carry its basis'
+        # rounding, which a float32 merge would compound (codes 1e-4 off where a block
+        # merge's are 1e-7); models merge rarely (once per rank), so the cost is small.
         w = other._basis.dtype
-        rows = (other._eigvals.clamp_min(0).sqrt()[:, None] * other._basis.T.double()).to(w)  # (r_o, N)
+        basis_o = other._basis.double()
+        rows = other._eigvals.clamp_min(0).sqrt()[:, None] * basis_o.T  # (r_o, N)
         self._uncentred += other._uncentred
         self.truncation_bound_ += other.truncation_bound_
         self._dropped += other._dropped
-        codes = list(other._codes) if self.keep_codes else []
-        basis_o = other._basis
+        self._basis = self._basis.double()
+        self._codes = [a.double() for a in self._codes]
         with torch.no_grad():
-            _, shift, n_old, n_new = self._merge_rows(
-                rows, other._mean, other._n, torch.diag(other._eigvals), other._total, max_rank
+            rot_rows, shift, n_old, n_new = self._merge_rows(
+                rows, other._mean, other._n, rows @ rows.T, other._total, max_rank
             )
+            assert self._basis is not None
             if self.keep_codes:
-                assert self._basis is not None and shift is not None
-                turn = basis_o.T @ self._basis  # (r_o, r'): U_oᵀ U'
-                move = ((n_old / n_new) * shift).to(w)
-                self._codes += [torch.addmm(move, a, turn) for a in codes]
+                assert shift is not None
+                # U_oᵀ U' = diag(1/√s_o) (Y U'), from the small matrices as the block merge's
+                # rotations are (the product with U_o itself would carry its rounding).
+                turn = (
+                    rot_rows
+                    / other._eigvals.clamp_min(0).sqrt().clamp_min(torch.finfo(torch.float64).tiny)[:, None]
+                )
+                move = (n_old / n_new) * shift
+                self._codes += [torch.addmm(move, a.double(), turn) for a in other._codes]
+        self._basis = self._basis.to(w)
+        self._codes = [a.to(w) for a in self._codes]
+        self._stale = True
+        return self
+
+    def report_as(self, dtype: torch.dtype) -> IncrementalEigenspace:
+        """Reports the fitted record (``mean_``, ``components_``, ``eigenvalues_``,
+        ``codes_``, the layer) in ``dtype`` (float32 or float64), whatever the dtype the
+        views were merged in: float32 views merged in float64, for models merged across a
+        process group's ranks, whose float32 bases would round their codes 1e-4 apart."""
+        if dtype not in DTYPES:
+            raise TypeError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
+        self._report = dtype
         self._stale = True
         return self
 
@@ -310,13 +333,14 @@ class IncrementalEigenspace(FittedEigenspace):
 
     def _record(self) -> EigenFit:
         assert self._mean is not None and self._basis is not None and self._dtype is not None
+        dtype = getattr(self, "_report", None) or self._dtype
         k = centred_k(
             self.n_components,
             self._eigvals,
             torch.tensor(self._total, dtype=torch.float64),
             self._mean,
             self._n,
-            self._dtype,
+            dtype,
             "the views merged",
         )
         components = self._basis[:, :k].T
@@ -327,7 +351,7 @@ class IncrementalEigenspace(FittedEigenspace):
             torch.tensor(self._total, dtype=torch.float64),
             self._n,
             self._shape,
-            self._dtype,
+            dtype,
         )
         self._signs = (fit.components.double() * components.double()).sum(1).sign()  # peak_signs flips
         return fit

@@ -91,9 +91,11 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
             views, indices round(linspace(0, P − 1, m)): deterministic, and spread over the
             gallery's objects and poses when the views are stored in order.
 
+    The arguments are stored as given and checked when a fit starts (scikit-learn's habit).
+
     Raises:
-        TypeError: an argument has the wrong type.
-        ValueError: an unknown kernel, gamma <= 0, degree < 1, nystrom < 1, or
+        TypeError: at fit, an argument has the wrong type.
+        ValueError: at fit, an unknown kernel, gamma <= 0, degree < 1, nystrom < 1, or
             gamma="median" with a kernel other than rbf.
 
     Example:
@@ -113,26 +115,33 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
         nystrom: int | None = None,
     ) -> None:
         super().__init__(n_components)
-        if callable(kernel) and not isinstance(kernel, str):
-            self.kernel: str | KernelFn = kernel
-        else:
-            self.kernel = check_choice(kernel, "kernel", KERNELS)
+        self.kernel: str | KernelFn = kernel
+        self.gamma: float | str | None = gamma
+        self.degree = degree
+        self.coef0 = coef0
+        self.nystrom = nystrom
+
+    def _validate_params(self) -> None:
+        """Checks the arguments, stored as given (scikit-learn's habit); every fit calls it."""
+        super()._validate_params()
+        kernel, gamma = self.kernel, self.gamma
+        if not (callable(kernel) and not isinstance(kernel, str)):
+            check_choice(kernel, "kernel", KERNELS)
         if gamma == "median":
-            if self.kernel != "rbf":
+            if kernel != "rbf":
                 raise ValueError(
                     f"gamma='median' is a bandwidth for kernel='rbf' only, got kernel={kernel!r}"
                 )
-            self.gamma: float | str | None = "median"
-            _, self.degree, self.coef0 = check_kernel_params(None, degree, coef0)
+            check_kernel_params(None, self.degree, self.coef0)
         else:
             if isinstance(gamma, str):
                 raise ValueError(f"gamma={gamma!r} must be None, 'median' or a number > 0")
-            self.gamma, self.degree, self.coef0 = check_kernel_params(gamma, degree, coef0)
+            check_kernel_params(gamma, self.degree, self.coef0)
         try:  # None (exact kernel PCA) or the number of landmark views
-            self.nystrom = None if nystrom is None else check_int(nystrom, "nystrom", 1)
+            None if self.nystrom is None else check_int(self.nystrom, "nystrom", 1)
         except TypeError:
             raise TypeError(
-                f"nystrom must be None or an int >= 1, got {type(nystrom).__name__} {nystrom!r}"
+                f"nystrom must be None or an int >= 1, got {type(self.nystrom).__name__} {self.nystrom!r}"
             ) from None
 
     def __repr__(self) -> str:
@@ -226,6 +235,7 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
             ValueError: bad shape, P < 2, non-finite values, ``nystrom`` > P, or an int
                 ``n_components`` larger than the number of positive eigenvalues.
         """
+        self._validate_params()
         x, image_shape = views_to_fit(X)
         with torch.no_grad():
             if self.nystrom is None:
@@ -363,12 +373,13 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
             phi = self._kernel(x, fit.vectors, fit.gamma, "X, L").double() @ fit.w_inv_sqrt.double()
             return float(torch.linalg.norm(exact - phi @ phi.T) / torch.linalg.norm(exact))
 
-    def to_module(self, unit_norm: bool = False) -> KernelProjection:
+    def to_module(self, unit_norm: bool | None = None) -> KernelProjection:
         """Returns the frozen ``KernelProjection`` (copies of the fitted tensors).
 
         Args:
-            unit_norm: the module divides each input view by its L2 norm first (fit on
-                unit-norm views then).
+            unit_norm: whether the module divides each input view by its L2 norm first;
+                None (the default) means as fitted, as in :meth:`Eigenspace.to_module`:
+                this estimator fits the rows as given, so None is False.
 
         Raises:
             NotFittedError: before ``fit``.
@@ -380,7 +391,7 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
                 f"to_module needs a named kernel, one of {KERNELS}: a callable kernel cannot be "
                 "exported to ONNX nor saved in a state_dict (use transform instead)"
             )
-        return KernelProjection(
+        return KernelProjection.from_tensors(
             fit.vectors,
             fit.coefficients,
             fit.kernel_mean,
@@ -390,5 +401,5 @@ class KernelEigenspace(FittedEstimator[_KernelFit]):
             coef0=self.coef0,
             eigenvalues=fit.eigenvalues,
             image_shape=fit.image_shape,
-            unit_norm=unit_norm,
+            unit_norm=False if unit_norm is None else unit_norm,  # as fitted: the rows as given
         )

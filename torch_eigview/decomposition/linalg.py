@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 #: Extra random directions of the randomized range finder by default (``oversample="auto"``
-#: with ``method="randomized"``): l = k + 10. Its passes are fixed (3 + ``n_iter``), so
+#: with ``solver="randomized"``): l = k + 10. Its passes are fixed (3 + ``n_iter``), so
 #: extra directions buy accuracy, not fewer passes, each at a share of every pass's
 #: products; Halko, Martinsson and Tropp (2011, Sec. 4.2) find 5 or 10 adequate, and
 #: scikit-learn's randomized PCA takes 10 (``n_oversamples``).
@@ -374,6 +374,6 @@ def sketch_components(
     if not isinstance(n_components, int) and float(eigvals[:k].sum() / total) < n_components:
         raise ValueError(
             f"n_components={n_components} (energy fraction) needs more than the {eigvals.numel()} "
-            "directions of the randomized sketch: raise oversample or use method='exact'"
+            "directions of the randomized sketch: raise oversample or use solver='exact'"
         )
     return eigvals[:k], wt[:k] @ q.T

@@ -5,7 +5,7 @@ source: a callable that returns a fresh iterable of blocks each time it is calle
 blocks are synthesized again, or read again from disk), a sequence of tensors, or one
 tensor split into row blocks. Every pass over the source must yield the same views.
 
-Three methods, all bounded in memory (``"auto"`` takes ``"subspace"`` where
+Three solvers (``solver=``), all bounded in memory (``"auto"`` takes ``"subspace"`` where
 :class:`~torch_eigview.decomposition.eigenspace.Eigenspace`'s "auto" would, else ``"exact"``;
 the default is ``"exact"``: a pass over a stream costs more than the products alone, so a
 subspace iteration stopped for slow convergence costs more here than in memory):
@@ -41,6 +41,7 @@ is :mod:`torch_eigview.decomposition.linalg`'s, shared with ``Eigenspace``.
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Callable, Sequence
 
 import torch
@@ -65,7 +66,7 @@ from torch_eigview.decomposition.subspace import leading_by_subspace
 
 __all__ = ["BlockSource", "StreamingEigenspace", "blocks_of"]
 
-_METHODS = ("auto", "exact", "subspace", "randomized")
+_SOLVERS = ("auto", "exact", "subspace", "randomized")
 _NAME = "the streamed views"  # the fitted views, as the errors name them
 # The chunk size the fits read from _tuning at call time, kept under its old name for
 # the benchmarks' memory model (benchmarks/_fit_case.py imports it from here).
@@ -77,13 +78,13 @@ class StreamingEigenspace(FittedEigenspace):
 
     The fitted attributes, ``transform``, ``inverse_transform`` and ``to_module`` are those
     of :class:`~torch_eigview.decomposition.eigenspace.Eigenspace`, which the exact method
-    equals on the stacked views (the subspace method to its tolerance); ``method_`` is the
-    method that ran ("exact" where the subspace iteration handed over to it), and
+    equals on the stacked views (the subspace solver to its tolerance); ``solver_`` is the
+    solver that ran ("exact" where the subspace iteration handed over to it), and
     ``n_passes_`` the passes over the source.
 
     Args:
         n_components: k (int >= 1) or an energy fraction in (0, 1).
-        method: ``"exact"`` (mean, then the N×N scatter or the P×P Gram matrix by panels;
+        solver: ``"exact"`` (mean, then the N×N scatter or the P×P Gram matrix by panels;
             equals ``Eigenspace`` on the stacked views), ``"subspace"`` (subspace iteration
             converged to the k leading eigenpairs, an int k), ``"auto"`` (``"subspace"``
             where ``Eigenspace``'s "auto" takes it, else ``"exact"``) or ``"randomized"``
@@ -97,6 +98,10 @@ class StreamingEigenspace(FittedEigenspace):
             "randomized", whose passes are fixed and whose extra directions buy accuracy.
         n_iter: power iterations of the randomized method.
         seed: seed of the randomized method's test matrix Ω (P, l), drawn in float64.
+        method: deprecated, the old name of ``solver`` (``Eigenspace``'s name for the same
+            choice); it warns and sets ``solver``.
+
+    The arguments are stored as given and checked when a fit starts (scikit-learn's habit).
 
     Example:
         >>> X = torch.randn(30, 64, dtype=torch.float64)
@@ -110,26 +115,60 @@ class StreamingEigenspace(FittedEigenspace):
         self,
         n_components: int | float = 15,
         *,
-        method: str = "exact",
+        solver: str = "exact",
         max_views: int = 4096,
         oversample: int | str = "auto",
         n_iter: int = 2,
         seed: int = 0,
+        method: str | None = None,
     ) -> None:
         super().__init__(n_components)
-        if not isinstance(method, str) or method not in _METHODS:
-            raise ValueError(f"method={method!r} must be one of {_METHODS}")
-        self.method = method
-        self.max_views = check_int(max_views, "max_views", 1)
-        self.oversample = check_oversample(oversample)
-        self.n_iter = check_int(n_iter, "n_iter", 0)
-        # Validated here, not when the randomized method first draws Ω at the end of a pass.
-        self.seed = check_int(seed, "seed", -(2**63), 2**64 - 1)
+        if method is not None:
+            warnings.warn(
+                "StreamingEigenspace(method=...) is deprecated: the argument is named solver, as "
+                "Eigenspace's; give solver=...",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            if solver != "exact":
+                raise TypeError(f"give solver={solver!r} or the deprecated method={method!r}, not both")
+            solver = method
+        self.solver = solver
+        self.max_views = max_views
+        self.oversample = oversample
+        self.n_iter = n_iter
+        self.seed = seed
         self.n_passes_ = 0
-        self.method_: str | None = None  # None until a fit here (or a fit from elsewhere)
+        self.solver_: str | None = None  # None until a fit here (or a fit from elsewhere)
+
+    def _validate_params(self) -> None:
+        super()._validate_params()
+        if not isinstance(self.solver, str) or self.solver not in _SOLVERS:
+            raise ValueError(f"solver={self.solver!r} must be one of {_SOLVERS}")
+        check_int(self.max_views, "max_views", 1)
+        check_oversample(self.oversample)
+        check_int(self.n_iter, "n_iter", 0)
+        # Checked before the first pass, not when the randomized solver draws Ω after it.
+        check_int(self.seed, "seed", -(2**63), 2**64 - 1)
+
+    @property
+    def method(self) -> str:
+        """Deprecated: ``solver``."""
+        warnings.warn(
+            "StreamingEigenspace.method is deprecated: read solver", DeprecationWarning, stacklevel=2
+        )
+        return self.solver
+
+    @property
+    def method_(self) -> str | None:
+        """Deprecated: ``solver_``."""
+        warnings.warn(
+            "StreamingEigenspace.method_ is deprecated: read solver_", DeprecationWarning, stacklevel=2
+        )
+        return self.solver_
 
     def __repr__(self) -> str:
-        return f"StreamingEigenspace(n_components={self.n_components!r}, method={self.method!r})"
+        return f"StreamingEigenspace(n_components={self.n_components!r}, solver={self.solver!r})"
 
     def fit(self, X: torch.Tensor | BlockSource | Sequence[torch.Tensor]) -> StreamingEigenspace:
         """Fits on the views of a re-generable block source.
@@ -174,16 +213,17 @@ class StreamingEigenspace(FittedEigenspace):
         return z
 
     def _fit_stream(self, stream: Stream) -> EigenFit:
+        self._validate_params()
         with torch.no_grad():
             mean64 = stream_mean(stream)
             assert stream.n_views is not None and stream.dtype is not None
             if stream.n_views < 2:
                 raise ValueError(f"blocks must hold at least 2 views in all, got P={stream.n_views}")
-            method = self.method
+            method = self.solver
             if method in ("auto", "subspace"):
                 oversample = oversample_for(self.oversample, "subspace")
                 method = pick_solver(
-                    self.n_components, method, stream.n_views, mean64.numel(), "method", oversample
+                    self.n_components, method, stream.n_views, mean64.numel(), "solver", oversample
                 )
             fit = self._subspace(stream, mean64) if method == "subspace" else None
             if fit is None and method == "randomized":
@@ -195,7 +235,7 @@ class StreamingEigenspace(FittedEigenspace):
                 fit = exact(stream, mean64)
                 self.n_passes_ += passes
                 method = "exact"
-            self.method_ = method
+            self.solver_ = method
         self._state = fit
         return fit
 

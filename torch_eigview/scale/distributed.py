@@ -3,14 +3,14 @@
 Each rank produces (synthesizes, loads) the views of its own objects, a (P_r, N) shard; the
 eigenspace of all P = Σ_r P_r views comes out identical on every rank:
 
-- ``method="exact"`` (default): the mean by ``all_reduce``; the P×P Gram matrix of the
+- ``solver="exact"`` (default): the mean by ``all_reduce``; the P×P Gram matrix of the
   centred views by broadcasting each rank's shard in turn (rank r fills its rows
   Xc_r Xc_sᵀ, memory: its shard plus one other), then one ``all_reduce``; every rank runs
   the same float64 ``eigh``; the components Λ^(−1/2) Σ_r V_rᵀ Xc_r by ``all_reduce`` of
   (k, N) partial sums. Equals :class:`~torch_eigview.decomposition.eigenspace.Eigenspace` on the
   stacked views up to rounding (to the subspace solver's tolerance where its "auto" takes
   that solver: an int k with P and N both at least 4096).
-- ``method="randomized"``: the range finder of :mod:`torch_eigview.decomposition.streaming`, with
+- ``solver="randomized"``: the range finder of :mod:`torch_eigview.decomposition.streaming`, with
   Y = Σ_r Xc_rᵀ Ω_r reduced by ``all_reduce`` (N × l per pass); Ω's rows are drawn by
   global view number, so the result equals the single-process ``StreamingEigenspace``
   with the same seed. Communication N·l per pass instead of the shards.
@@ -28,6 +28,7 @@ The repository's ``benchmarks/bench_distributed.py`` runs it on COIL-20 under to
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import torch
@@ -47,7 +48,7 @@ from torch_eigview.decomposition.linalg import (
 
 __all__ = ["fit_distributed"]
 
-_METHODS = ("exact", "randomized")
+_SOLVERS = ("exact", "randomized")
 
 
 def _local_problem(views: object) -> str | None:
@@ -173,11 +174,12 @@ def fit_distributed(
     views: torch.Tensor,
     n_components: int | float = 15,
     *,
-    method: str = "exact",
+    solver: str = "exact",
     group: dist.ProcessGroup | None = None,
     oversample: int | str = "auto",
     n_iter: int = 2,
     seed: int = 0,
+    method: str | None = None,
 ) -> Eigenspace:
     """Fits one eigenspace over the views of all ranks; call it on every rank.
 
@@ -185,12 +187,14 @@ def fit_distributed(
         views: this rank's (P_r, N) or (P_r, C, H, W) views, float32/float64, P_r >= 1;
             the same view shape and dtype on every rank; P = Σ_r P_r >= 2.
         n_components: k or an energy fraction, as for ``Eigenspace``.
-        method: ``"exact"`` (Gram by shard broadcasts) or ``"randomized"`` (range finder).
+        solver: ``"exact"`` (Gram by shard broadcasts) or ``"randomized"`` (range finder),
+            as ``StreamingEigenspace``'s ``solver``.
         group: the process group (default: the world).
         oversample, n_iter, seed: the randomized method's l = k + ``oversample`` (an int
             >= 0, or "auto":
             :data:`~torch_eigview.decomposition.linalg.RANDOMIZED_OVERSAMPLE`, 10, as
             ``StreamingEigenspace``'s), power iterations and the seed of Ω.
+        method: deprecated, the old name of ``solver``; it warns and sets ``solver``.
 
     Returns:
         A fitted ``Eigenspace`` (:meth:`Eigenspace.from_fit`), the same on every rank.
@@ -201,20 +205,30 @@ def fit_distributed(
         TimeoutError: a collective did not complete within the process group's timeout
             (``init_process_group(timeout=...)``): a rank stalled or died.
         ValueError: on every rank, when any rank has no views, bad or non-finite views, a
-            view shape or dtype or a parameter (``n_components``, ``method``, ``oversample``,
+            view shape or dtype or a parameter (``n_components``, ``solver``, ``oversample``,
             ``n_iter``, ``seed``) different from rank 0's; an ``oversample`` other than
             "auto" or an int >= 0 (TypeError for one of another type); ``n_components``
             above the rank, or an energy fraction the randomized sketch does not reach.
     """
     if not dist.is_available() or not dist.is_initialized():
         raise RuntimeError("fit_distributed needs torch.distributed initialized (init_process_group)")
+    if method is not None:
+        warnings.warn(
+            "fit_distributed(method=...) is deprecated: the argument is named solver, as "
+            "StreamingEigenspace's; give solver=...",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        if solver != "exact":
+            raise TypeError(f"give solver={solver!r} or the deprecated method={method!r}, not both")
+        solver = method
     n_components = check_n_components(n_components)
-    if method not in _METHODS:
-        raise ValueError(f"method={method!r} must be one of {_METHODS}")
+    if solver not in _SOLVERS:
+        raise ValueError(f"solver={solver!r} must be one of {_SOLVERS}")
     rank = dist.get_rank(group)
     params: dict[str, object] = {
         "n_components": n_components,
-        "method": method,
+        "solver": solver,
         "oversample": oversample,
         "n_iter": n_iter,
         "seed": seed,
@@ -233,7 +247,7 @@ def fit_distributed(
 
     with torch.no_grad():
         mean64 = all_reduce(x.double().sum(dim=0)) / n_views
-        if method == "randomized":
+        if solver == "randomized":
             omega = sketch_matrix(
                 n_components, oversample_for(oversample, "randomized"), n_views, x.shape[1], seed, x.device
             )

@@ -148,7 +148,7 @@ class EigenspacePCA(_EigenspaceTransformer):
         check_is_fitted(self)
         s = self.eigenspace_
         assert isinstance(s, Eigenspace)
-        return EigenProjection(
+        return EigenProjection.from_tensors(
             s.mean_, s.components_, s.eigenvalues_, self.image_shape_, unit_norm=self.unit_norm
         )
 
