@@ -4,6 +4,7 @@ synthesized views (``--reject-rate``), ``eigview evaluate --reject`` scores it."
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -50,8 +51,15 @@ def _fit(manifest: Path, out: Path, *extra: str) -> int:
     return main([*argv, "-k", "8", "--quiet", *extra, "--out", str(out)])
 
 
-def test_fit_calibrates_rejection_by_default(known: Path, tmp_path: Path) -> None:
+def test_fit_calibrates_rejection_by_default(
+    known: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert _fit(known, tmp_path / "m.pt") == 0
+    # the summary gives the calibration's own estimate of its rate
+    assert re.search(
+        r"rejection calibrated on \d+ views \(estimated \d+\.\d% of known views rejected\)",
+        capsys.readouterr().out,
+    )
     recognizer, meta = load_recognizer(tmp_path / "m.pt")
     # The default held-out poses: 45 degrees before the first seed (0) to 45 past the last (10).
     assert recognizer.rejects and meta["reject_rate"] == 0.05 and meta["reject_poses"] == [-45.0, 55.0, 2.5]

@@ -6,7 +6,7 @@ from torch_eigview.geometry.angles import AROUND_SEEDS
 from torch_eigview.method.estimator import FewViewEigenspace
 from torch_eigview.method.inputs import ALL_COMPONENTS, resolve_components
 from torch_eigview.method.memory import MemoryBudgetError
-from torch_eigview.method.rejection import calibrate_rejection
+from torch_eigview.method.rejection import calibrate_rejection, estimate_reject_rate
 
 __all__ = [
     "ALL_COMPONENTS",
@@ -14,5 +14,6 @@ __all__ = [
     "FewViewEigenspace",
     "MemoryBudgetError",
     "calibrate_rejection",
+    "estimate_reject_rate",
     "resolve_components",
 ]
