@@ -14,6 +14,11 @@ A :class:`Case` calls one entry point with one bad input. Its outcome is one of
 - ``silent``: no error at all, or a result that is not finite;
 - ``lost``: the case's own check of the files it wrote failed (data destroyed).
 
+A case with ``warns`` is input that is well-formed but likely wrong, where the package goes
+on and says so: it is ``clear`` when the call succeeds with a warning that matches (a
+Python warning, or the command's ``eigview: warning: ...`` line on stderr), or fails with a
+matching error; ``silent`` when it succeeds without one.
+
 A :class:`Good` calls one entry point with one valid input (a ``--threads 1`` run, a valid
 manifest), which must succeed with a sane answer: ``right``, or ``wrong`` for an error, a
 hang or an answer its check refuses (:func:`judge`). A validation that refuses good input
@@ -29,6 +34,7 @@ import io
 import math
 import re
 import signal
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -78,6 +84,8 @@ class Ran:
 #: The start of an error line: ``eigview: error: `` (the command's handler), ``eigview fit:
 #: error: `` (argparse, after its usage text), ``eigview predict: error: `` (one image).
 _ERROR_LINE = re.compile(r"^eigview(?: [\w-]+)?: error: ")
+#: A warning line of the command's: ``eigview: warning: ...``.
+_WARNING_LINE = re.compile(r"^eigview(?: [\w-]+)?: warning: ")
 #: A line of the command's own that is not part of an error message (a warning, a summary).
 _OWN_LINE = re.compile(r"^eigview(?: [\w-]+)?: ")
 
@@ -125,6 +133,18 @@ class Case:
     #: case is then expected not to be clear (a strict xfail in :func:`params`), so that
     #: the fix of the message shows as a test to update.
     todo: str = ""
+    #: A warning (or a matching error) is the clear answer: the input may be meant.
+    warns: bool = False
+
+
+def _warning_text(out: object, caught: list[warnings.WarningMessage]) -> str:
+    """The warnings a successful call gave: Python's, then the command's own lines."""
+    lines = [str(w.message) for w in caught]
+    if isinstance(out, Ran):
+        lines += [
+            line.split("warning: ", 1)[1] for line in out.stderr.splitlines() if _WARNING_LINE.match(line)
+        ]
+    return "\n".join(lines)
 
 
 def params(cases: Sequence[Case | Good]) -> list[Any]:
@@ -223,7 +243,8 @@ def _finite(out: Any) -> bool:
 def outcome(case: Case, tmp: Path) -> tuple[str, str]:
     """(kind, what happened) for one case run in the empty folder ``tmp``."""
     try:
-        with deadline():
+        with deadline(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             out = case.run(tmp)
     except (Expired, TimeoutError) as exc:
         return "hang", str(exc)
@@ -237,6 +258,11 @@ def outcome(case: Case, tmp: Path) -> tuple[str, str]:
         if isinstance(exc, CommandError) and message:  # the error lines, not the usage text
             return "unhelpful", f"CommandError: exit status {exc.status}: {message}"
         return "unhelpful", f"{type(exc).__name__}: {exc}"
+    if case.warns:
+        said = _warning_text(out, caught)
+        if re.search(case.match, said, flags=re.DOTALL):
+            return "clear", said
+        return "silent", f"no matching warning ({said[:200]!r}); returned {out!r:.200}"
     return "silent", f"no error; returned {out!r:.200}" if _finite(out) else "non-finite result"
 
 

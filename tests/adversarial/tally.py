@@ -26,6 +26,7 @@ from tests.adversarial import (
     test_evaluate_inputs,
     test_fit_inputs,
     test_manifest_inputs,
+    test_wrong_inputs,
 )
 from tests.adversarial.harness import judge, outcome
 
@@ -47,6 +48,7 @@ def main(argv: list[str]) -> int:
         test_evaluate_inputs,
         test_api_inputs_2,
         test_api_inputs_3,
+        test_wrong_inputs,
     )
     only = [m for m in modules if _name(m) in argv]  # e.g. test_fit_inputs
     for module in only or modules:

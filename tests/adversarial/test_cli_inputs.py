@@ -116,14 +116,22 @@ COIL = [
         "95",
         match=r"elevation=95\.0 must be an angle in degrees in \(-90, 90\)",
     ),
-    _coil("elevation-nan", *A, "--elevation", "nan", match=r"--elevation must be .auto. or a finite number of degrees, got .nan."),
+    _coil(
+        "elevation-nan",
+        *A,
+        "--elevation",
+        "nan",
+        match=r"--elevation must be .auto. or a finite number of degrees, got .nan.",
+    ),
     _coil("objects-0", *A, "--objects", "0", match=r"--objects: .*must hold positive object ids, got 0"),
     _coil("objects-reversed", *A, "--objects", "5-3", match=r"--objects: .*holds the reversed range 5-3"),
     _coil("objects-text", *A, "--objects", "abc", match=r"--objects: .*'abc' must look like '1-20'"),
     _coil("objects-absent", *A, "--objects", "9", match=r"objects \[9\] are not in .* \(it holds \[1, 2\]\)"),
     _coil("alpha-0", "--alpha", "0", match=r"alpha=0\.0 must not be a multiple of 180"),
     _coil("alpha-180", "--alpha", "180", match=r"alpha=180\.0 must not be a multiple of 180"),
-    _coil("alpha-1e300", "--alpha", "1e300", match=r"alpha=1e\+300 must be an angle .* \[-360, 360\]"),
+    _coil(
+        "alpha-1e300", "--alpha", "1e300", match=r"--alpha must be degrees within \[-360, 360\], got '1e300'"
+    ),
     _coil("threads-0", *A, "--threads", "0", match=threads_error("0")),
     _coil("threads-negative", *A, "--threads", "-2", match=threads_error("-2")),
     _coil(

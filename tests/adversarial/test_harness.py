@@ -45,3 +45,29 @@ def test_a_good_case_is_right_only_when_it_runs_and_its_check_holds(tmp_path: Pa
     assert judge(Good("check", lambda t: 1.0, fail), tmp_path) == ("wrong", "a wrong answer; returned 1.0")
     assert judge(Good("refused", refuse, lambda out, t: True), tmp_path)[0] == "wrong"
     assert judge(Good("nan", lambda t: float("nan"), lambda out, t: True), tmp_path)[0] == "wrong"
+
+
+def test_a_warning_case_is_clear_only_with_a_matching_warning(tmp_path: Path) -> None:
+    """``warns``: a matching Python warning or ``eigview: warning:`` line is clear; none, or
+    another, is silent; a matching error is clear too."""
+    import warnings
+
+    from tests.adversarial.harness import Ran
+
+    def warn(tmp: Path) -> object:
+        warnings.warn("mask m.png marks 60% of the image border as object", UserWarning, stacklevel=1)
+        return 1
+
+    def printed(tmp: Path) -> object:
+        return Ran("", "eigview: warning: mask m.png marks 60% of the image border as object\n")
+
+    def fail(tmp: Path) -> object:
+        raise ValueError("mask m.png marks 95% of the image border as object")
+
+    pattern = r"mask m\.png marks \d+% of the image border"
+    assert outcome(Case("py", warn, pattern, warns=True), tmp_path)[0] == "clear"
+    assert outcome(Case("cli", printed, pattern, warns=True), tmp_path)[0] == "clear"
+    assert outcome(Case("err", fail, pattern, warns=True), tmp_path)[0] == "clear"
+    assert outcome(Case("none", lambda t: 1, pattern, warns=True), tmp_path)[0] == "silent"
+    assert outcome(Case("other", warn, r"aspect ratio", warns=True), tmp_path)[0] == "silent"
+    assert outcome(Case("plain", warn, pattern), tmp_path)[0] == "silent"  # a warning is no error

@@ -34,12 +34,12 @@ def test_around_seeds_extends_past_both_end_seeds(steps: list[float], want: tupl
 
 
 def test_seed_plan_default_and_given_ranges() -> None:
-    assert seed_plan([0.0, 30.0], None, 0.0, None).thetas == angle_range(-20.0, 50.0, 1.0, "t")
-    assert seed_plan([0.0, 330.0], None, 0.0, None).thetas == angle_range(-50.0, 20.0, 1.0, "t")
-    assert seed_plan([0.0, 10.0, 20.0], None, 0.0, None).thetas == angle_range(-20.0, 40.0, 1.0, "t")
+    assert seed_plan([0.0, 30.0], None, None, None).thetas == angle_range(-20.0, 50.0, 1.0, "t")
+    assert seed_plan([0.0, 330.0], None, None, None).thetas == angle_range(-50.0, 20.0, 1.0, "t")
+    assert seed_plan([0.0, 10.0, 20.0], None, None, None).thetas == angle_range(-20.0, 40.0, 1.0, "t")
     # --synth as given keeps its meaning: from the first seed, each further seed extending it.
-    assert seed_plan([0.0, 30.0], None, 0.0, (-20.0, 20.0, 2.0)).thetas == angle_range(-20.0, 20.0, 2.0, "t")
-    assert seed_plan([0.0, 10.0, 20.0], None, 0.0, (-20.0, 20.0, 1.0)).thetas == angle_range(
+    assert seed_plan([0.0, 30.0], None, None, (-20.0, 20.0, 2.0)).thetas == angle_range(-20.0, 20.0, 2.0, "t")
+    assert seed_plan([0.0, 10.0, 20.0], None, None, (-20.0, 20.0, 1.0)).thetas == angle_range(
         -20.0, 30.0, 1.0, "t"
     )
     circle = seed_plan(None, 8, 0.0, None)
@@ -47,9 +47,9 @@ def test_seed_plan_default_and_given_ranges() -> None:
 
 
 def test_synth_record_is_the_range_the_gallery_holds() -> None:
-    plan = seed_plan([0.0, 30.0], None, 0.0, None)
+    plan = seed_plan([0.0, 30.0], None, None, None)
     assert synth_record(None, plan) == [-20.0, 50.0, 1.0]
-    assert synth_record([-20.0, 20.0, 2.0], seed_plan([0.0, 30.0], None, 0.0, (-20.0, 20.0, 2.0))) == [
+    assert synth_record([-20.0, 20.0, 2.0], seed_plan([0.0, 30.0], None, None, (-20.0, 20.0, 2.0))) == [
         -20.0,
         20.0,
         2.0,
@@ -97,7 +97,7 @@ def test_estimator_default_range_and_bad_values() -> None:
 def test_reject_poses_default_lies_past_both_seeds() -> None:
     """The held-out views that calibrate rejection: 45 degrees past both end seeds, every
     2.5, the gallery's angles left out; as given otherwise; the circle's midpoints."""
-    plan = seed_plan([0.0, 30.0], None, 0.0, None)
+    plan = seed_plan([0.0, 30.0], None, None, None)
     poses = reject_poses(plan, None)
     assert poses == (-45.0, 75.0, 2.5)
     held = held_out_thetas(plan, poses)
@@ -113,7 +113,7 @@ def test_reject_poses_default_lies_past_both_seeds() -> None:
 
 def test_off_gallery_compares_round_the_circle() -> None:
     # Seeds 0 and 170: the gallery runs to 190, which is -170.
-    gallery = seed_plan([0.0, 170.0], None, 0.0, None).thetas or []
+    gallery = seed_plan([0.0, 170.0], None, None, None).thetas or []
     held = off_gallery((-180.0, 180.0, 2.5), gallery, "reject_poses")
     assert -170.0 not in held and -175.0 not in held and -180.0 not in held and 180.0 not in held
     assert -172.5 in held

@@ -195,8 +195,17 @@ def test_from_maps_errors() -> None:
     )
     with pytest.raises(ValueError, match=r"one object \(B = 1\), got B=2"):
         SparseViewOperator.from_maps(images, two)
-    with pytest.raises(ValueError, match=r"images must have shape \(S, C, H, W\) = \(2, C, 12, 16\)"):
+    with pytest.raises(
+        ValueError, match=r"images are \(H, W\)=\(12, 15\), the maps were built for \(H, W\)=\(12, 16\)"
+    ):
         SparseViewOperator.from_maps(images[..., :-1], maps)
+    with pytest.raises(
+        ValueError,
+        match=r"images are \(H, W\)=\(6, 8\), the maps were built for \(H, W\)=\(12, 16\).*these images$",
+    ):
+        SparseViewOperator.from_maps(images[..., ::2, ::2], maps)  # smaller images: not blamed on support=
+    with pytest.raises(ValueError, match=r"images are \(H, W\)=\(24, 16\).*or the maps hold a band of rows"):
+        SparseViewOperator.from_maps(torch.cat([images, images], dim=2), maps)
     with pytest.raises(ValueError, match=r"images must have shape \(S, C, H, W\) = \(2, C, 12, 16\)"):
         SparseViewOperator.from_maps(images[:1], maps)
     with pytest.raises(ValueError, match="images must have shape"):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from collections.abc import Callable, Iterable
 from functools import partial
@@ -17,9 +18,11 @@ from torch_eigview.parse import parse_float, parse_int
 
 __all__ = [
     "MIN_OPSET",
+    "ArgumentParser",
     "HelpFormatter",
     "add_quiet",
     "add_threads",
+    "angle_arg",
     "bounded_int_arg",
     "components_arg",
     "elevation_arg",
@@ -36,6 +39,23 @@ __all__ = [
 T = TypeVar("T")
 
 MIN_OPSET = 18  # what torch_eigview.io.onnx exports
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser, reading every number argparse's own test misses as a value.
+
+    argparse tells a negative number from an option with ``-\\d+$|-\\d*\\.\\d+$``, so
+    ``--test -1e300 1e300`` takes ``-1e300`` for an unknown option and says "expected 2
+    arguments"; with exponents (and ``-inf``/``-nan``, refused later by name as not finite)
+    in the pattern, the value reaches the option's own check. No option here looks like a
+    number, so nothing is shadowed. Sub-commands inherit the class.
+    """
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._negative_number_matcher = re.compile(
+            r"^-(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$|^-(?:inf|infinity|nan)$", re.I
+        )
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -96,6 +116,23 @@ def finite_arg(flag: str) -> Callable[[str], float]:
             value = math.nan
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"{flag} must be a finite number, got {text!r}")
+        return value
+
+    return parse
+
+
+def angle_arg(flag: str) -> Callable[[str], float]:
+    """An argparse type: degrees within [-360, 360], the error naming ``flag``.
+
+    No angle of the method (a seed's azimuth, a range from it, a step) means anything past
+    a full turn, and ``--center 1e300`` would otherwise run, every pose wrapping to noise.
+    """
+    finite = finite_arg(flag)
+
+    def parse(text: str) -> float:
+        value = finite(text)
+        if abs(value) > 360.0:
+            raise argparse.ArgumentTypeError(f"{flag} must be degrees within [-360, 360], got {text!r}")
         return value
 
     return parse

@@ -14,9 +14,9 @@ from torch_eigview.apps.cli_args import (
     HelpFormatter,
     add_quiet,
     add_threads,
+    angle_arg,
     components_arg,
     elevation_arg,
-    finite_arg,
     gamma_arg,
     objects_arg,
     pose_step_arg,
@@ -55,13 +55,13 @@ def add_coil_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     )
     coil.add_argument(
         "--alpha",
-        type=finite_arg("--alpha"),
+        type=angle_arg("--alpha"),
         default=None,
         help="angle between seed views, degrees (required without --circle)",
     )
     coil.add_argument(
         "--center",
-        type=finite_arg("--center"),
+        type=angle_arg("--center"),
         default=0.0,
         help="pose of the first seed view and centre of the test range, degrees",
     )
@@ -91,7 +91,7 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     """The gallery, synthesis, eigenspace and output options of ``eigview coil``."""
     coil.add_argument(
         "--synth",
-        type=finite_arg("--synth"),
+        type=angle_arg("--synth"),
         nargs=3,
         default=(-20.0, 20.0, 1.0),
         metavar=("START", "STOP", "STEP"),
@@ -100,7 +100,7 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     )
     coil.add_argument(
         "--test",
-        type=finite_arg("--test"),
+        type=angle_arg("--test"),
         nargs=2,
         default=(-45.0, 45.0),
         metavar=("START", "STOP"),
@@ -146,7 +146,7 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
         "--kernel",
         choices=("rbf", "poly", "cosine", "linear"),
         default=None,
-        help="kernel PCA instead of the linear eigenspace (not with --save)",
+        help="kernel PCA instead of the linear eigenspace",
     )
     coil.add_argument(
         "--gamma",
@@ -316,8 +316,6 @@ def run_coil(args: argparse.Namespace) -> int:
     experiment.workers = _workers(args, experiment, folder)
     if args.circle is not None:
         experiment.circle(folder, args.objects, names=("--circle", "dense_step"))
-    if args.kernel and args.save:
-        raise ValueError("--save writes a linear eigenspace only: it cannot be used with --kernel")
     result = experiment.run(folder, progress=progress_bar(args.quiet, f"{args.method} objects", "obj"))
     if args.circle is None:
         title = (
@@ -338,7 +336,7 @@ def run_coil(args: argparse.Namespace) -> int:
             c, h, w = folder.image_shape
             prep = Preprocessing((h, w), c, unit_norm=not args.no_unit_norm, **background)
             meta["preprocessing"] = prep.to_json()
-        save_recognizer(args.save, result.recognizer, meta)
+        save_recognizer(result.recognizer, args.save, meta)
     return 0
 
 

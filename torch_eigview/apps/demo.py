@@ -83,7 +83,7 @@ def recognition_experiment(
     try:
         est.fit(seeds, seed_angles, labels=names, masks=masks, progress=progress)
     except ValueError as exc:
-        if "exceeds the rank" not in str(exc):
+        if "exceeds the rank" not in str(exc) and "has rank 0" not in str(exc):
             raise
         # The cause is the scene the command line chose, not an argument of the eigenspace.
         raise ValueError(

@@ -1,8 +1,8 @@
 """Where ``eigview fit``'s seed views lie and which angles each object's gallery holds.
 
 :func:`seed_plan` turns ``--seeds``, ``--center`` and ``--synth`` into a :class:`SeedPlan`
-(listed seeds: the gallery angles; ``--seeds M``: the full circle), :func:`pick_seeds`
-finds the seed views in a manifest, :func:`held_out_thetas` places the views that
+(listed seeds: the gallery angles; ``--seeds M``: the full circle),
+:func:`held_out_thetas` places the views that
 calibrate rejection, and :func:`synth_record` is the gallery range the model file records.
 Nothing here imports torch at import time (``eigview predict --onnx`` runs without it).
 """
@@ -11,12 +11,8 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from torch_eigview.datasets.manifest import ViewEntry, ViewManifest
-
-__all__ = ["SeedPlan", "held_out_thetas", "pick_seeds", "reject_poses", "seed_plan", "synth_record"]
+__all__ = ["SeedPlan", "held_out_thetas", "reject_poses", "seed_plan", "synth_record"]
 
 _TOL = 1e-6  # degrees: two azimuths this close are one pose
 
@@ -44,7 +40,10 @@ class SeedPlan:
 
 
 def seed_plan(
-    seeds: list[float] | None, circle: int | None, center: float, synth: tuple[float, float, float] | None
+    seeds: list[float] | None,
+    circle: int | None,
+    center: float | None,
+    synth: tuple[float, float, float] | None,
 ) -> SeedPlan:
     """The seed azimuths and gallery angles of ``--seeds`` (or ``--circle``), ``--center``
     and ``--synth`` (None: every degree from 20° before the first seed to 20° past the last,
@@ -52,7 +51,8 @@ def seed_plan(
 
     Raises:
         ValueError: fewer than two listed seeds; listed seeds that repeat an azimuth or lie
-            180 degrees apart; a bad ``--synth`` range.
+            180 degrees apart; a bad ``--synth`` range; ``--center`` (None: not given) with
+            listed seeds, where the first seed is the centre.
     """
     from torch_eigview.check import VIEW_LIMIT, check_limit  # imports torch: not on predict's path
     from torch_eigview.geometry.angles import angle_range, around_seeds, wrap_angle
@@ -62,9 +62,23 @@ def seed_plan(
         angle_range(*synth, "--synth")  # names a bad range before any image is read
     if circle is not None:
         check_limit(circle, "--circle", "seed views round the circle", VIEW_LIMIT)
+        center = 0.0 if center is None else center
+        if circle < 4:
+            # Each sector is synthesized from its first seed over [0, 360/M): Eq. 7 reaches
+            # less than 90 degrees from a seed, so M = 3's 120-degree sectors cannot be.
+            raise ValueError(
+                f"--circle {circle} puts the seeds {360.0 / circle:g} degrees apart, but a view is synthesized "
+                "less than 90 degrees from its sector's first seed (Eq. 7): give --circle 4 or more"
+            )
         azimuths = [(center + k * 360.0 / circle) % 360.0 for k in range(circle)]
         return SeedPlan(azimuths, wrap_angle(center), 360.0 / circle, None, step)
     seeds = list(seeds or [])
+    if center is not None:
+        # Listed seeds place themselves: a --center beside them would be ignored, silently.
+        raise ValueError(
+            f"--center {center:g} goes with --circle (the first of M seeds); with --seeds the first listed "
+            f"azimuth ({' '.join(f'{a:g}' for a in seeds)}) is the centre: drop --center or list the seeds from it"
+        )
     if len(seeds) < 2:
         raise ValueError(
             f"--seeds {' '.join(f'{a:g}' for a in seeds)} needs two or more azimuths to synthesize from "
@@ -97,43 +111,6 @@ def synth_record(synth: list[float] | None, plan: SeedPlan) -> list[float]:
     if plan.thetas is None:
         return [0.0, 360.0 - plan.step, plan.step]
     return [plan.thetas[0], plan.thetas[-1], plan.step]
-
-
-def _same_pose(a: float, b: float) -> bool:
-    from torch_eigview.geometry.angles import wrap_angle
-
-    return abs(wrap_angle(a - b)) <= _TOL
-
-
-def pick_seeds(manifest: ViewManifest, obj: str, azimuths: list[float]) -> list[ViewEntry]:
-    """The views of ``obj`` at ``azimuths`` (degrees), in that order.
-
-    Raises:
-        ValueError: the object has fewer views than seeds, none or several (elevations)
-            at a seed azimuth; the message names the object, the manifest and what it has.
-    """
-    views = manifest.views(obj)
-    have = ", ".join(f"{v.azimuth:g}" for v in views[:24]) + (", ..." if len(views) > 24 else "")
-    if len(views) < len(azimuths):
-        raise ValueError(
-            f"object {obj!r} has {len(views)} view(s) in {manifest.name}, fewer than the {len(azimuths)} "
-            f"seeds: azimuths {have}"
-        )
-    picked = []
-    for az in azimuths:
-        found = [v for v in views if _same_pose(v.azimuth, az)]
-        if not found:
-            raise ValueError(
-                f"object {obj!r} has no view at the seed azimuth {az:g} degrees in {manifest.name}; "
-                f"it has azimuths {have}"
-            )
-        if len(found) > 1:
-            raise ValueError(
-                f"object {obj!r} has {len(found)} views at the seed azimuth {az:g} degrees (other elevations): "
-                f"{', '.join(v.source for v in found)}; list one per azimuth"
-            )
-        picked.append(found[0])
-    return picked
 
 
 def reject_poses(plan: SeedPlan, given: tuple[float, float, float] | None) -> tuple[float, float, float]:

@@ -87,12 +87,24 @@ def _checked_maps(maps: object, imgs: torch.Tensor) -> tuple[torch.Tensor, torch
     s, b, _, h, w = src_x.shape
     if b != 1:
         raise ValueError(f"maps must describe one object (B = 1), got B={b}; split the batch per object")
-    if maps.row0 != 0 or h != imgs.shape[2]:
+    if maps.row0 != 0:
         raise ValueError(
             f"maps must cover every row of the images ({imgs.shape[2]}), got rows {maps.row0}..{maps.row0 + h - 1} "
             "(maps built with support= hold a band of rows): build them without support"
         )
-    if (s, h, w) != (imgs.shape[0], imgs.shape[2], imgs.shape[3]):
+    if (h, w) != tuple(imgs.shape[2:]):
+        # Name the sizes first: maps of other images are the likelier cause; a band of rows
+        # (support=) is possible only where the widths agree and the maps hold fewer rows.
+        band = (
+            "; or the maps hold a band of rows (built with support=): build them without support"
+            if w == imgs.shape[3] and h < imgs.shape[2]
+            else ""
+        )
+        raise ValueError(
+            f"images are (H, W)=({imgs.shape[2]}, {imgs.shape[3]}), the maps were built for (H, W)=({h}, {w}) "
+            f"(maps.src_x {tuple(src_x.shape)}): build the maps for these images{band}"
+        )
+    if s != imgs.shape[0]:
         raise ValueError(
             f"images must have shape (S, C, H, W) = ({s}, C, {h}, {w}) to match maps.src_x "
             f"{tuple(src_x.shape)}, got {tuple(imgs.shape)}"
