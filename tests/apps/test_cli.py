@@ -118,7 +118,7 @@ def test_missing_root(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
         (["--components", "many"], "--components must be an int or a fraction in (0, 1)"),
         (["--objects", "5-3"], "reversed range 5-3"),
         (["--objects", "a"], "must look like '1-20'"),
-        (["--elevation", "up"], "--elevation must be 'auto' or degrees"),
+        (["--elevation", "up"], "--elevation must be 'auto' or a finite number of degrees"),
         (["--views", "4"], "invalid choice: 4"),
         (["--method", "knn"], "invalid choice: 'knn'"),
         (["--pose-step", "0"], "--pose-step must be a number of degrees in (0, 360], got '0'"),
@@ -349,3 +349,22 @@ def test_demo_loop_reports_each_object() -> None:
     )
     assert seen == ["head", "egg"]
     assert record["n_gallery"] == 2 * 3
+
+
+def test_ctrl_c_ends_with_a_line_not_a_traceback(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C while a command writes: exit status 130 and the writer's own message (which
+    says the previous file is unchanged), never a traceback."""
+    import torch_eigview.apps.cli as cli
+
+    def interrupted(args: object) -> int:
+        raise KeyboardInterrupt("could not write 'm.pt' (interrupted); any previous file is unchanged")
+
+    monkeypatch.setattr(cli, "run_fit", interrupted)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["fit", "--manifest", "views.csv", "--seeds", "0", "10", "--out", "m.pt"])
+    assert exit_info.value.code == 130
+    err = capsys.readouterr().err
+    assert "eigview: interrupted: could not write 'm.pt' (interrupted); any previous file is unchanged" in err
+    assert "Traceback" not in err

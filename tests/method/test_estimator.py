@@ -290,3 +290,51 @@ def test_angles_past_a_quarter_turn_from_their_seed_are_refused_by_name(seeds: t
         FewViewEigenspace(3, synth=(-20.0, 105.0, 5.0), synth_follows_seeds=False).fit(seeds, [0.0, 10.0])
     with pytest.raises(ValueError, match=r"reject_poses asks for views 100 degrees"):
         FewViewEigenspace(3, reject_rate=0.1, reject_poses=(-100.0, 20.0, 5.0)).fit(seeds, [0.0, 10.0])
+
+
+def test_fit_blocks_takes_view_dataset_items(
+    gallery: tuple[torch.Tensor, torch.Tensor, torch.Tensor], tmp_path: object
+) -> None:
+    """A ViewDataset, and a DataLoader over it (default collate), feed fit_blocks as they are:
+    the same model as the (views, labels, poses) blocks, with the object names as label_names_."""
+    from pathlib import Path
+
+    from PIL import Image
+
+    from torch_eigview.datasets import ViewDataset, ViewManifest
+
+    views, labels, poses = gallery
+    root = Path(str(tmp_path))
+    for view, label, pose in zip(views, labels.tolist(), poses.tolist(), strict=True):
+        pixels = (view[0] * 255).round().clamp(0, 255).to(torch.uint8).numpy()
+        Image.fromarray(pixels).save(root / f"{'abc'[label]}_{int(pose) % 360}.png")
+    dataset = ViewDataset(ViewManifest.from_pattern(root, "{object}_{azimuth}.png"), channels=1)
+    read = torch.stack([item["image"] for item in dataset])
+    read_labels = torch.tensor([ord(item["object"]) - ord("a") for item in dataset])
+    read_poses = torch.tensor([item["azimuth"] for item in dataset], dtype=torch.float64)
+    expected = FewViewEigenspace(4, max_views=16).fit_blocks([(read, read_labels, read_poses)])
+    for blocks in (dataset, DataLoader(dataset, batch_size=7)):
+        est = FewViewEigenspace(4, max_views=16).fit_blocks(blocks)
+        assert est.label_names_ == ["a", "b", "c"]  # the manifest lists the objects so
+        assert torch.equal(est.gallery_labels_, expected.gallery_labels_)
+        torch.testing.assert_close(est.gallery_poses_, expected.gallery_poses_)
+        torch.testing.assert_close(est.recognizer_.codes, expected.recognizer_.codes, atol=1e-5, rtol=1e-5)
+    with pytest.raises(ValueError, match=r"blocks\[0\] is a dict without the key 'image'"):
+        FewViewEigenspace(4).fit_blocks([{"views": read}])
+    with pytest.raises(ValueError, match="mixes ViewDataset items"):
+        FewViewEigenspace(4).fit_blocks([dataset[0], (read[:5], read_labels[:5])])
+
+
+def test_to_module_unit_norm_is_as_fitted() -> None:
+    """One rule for every ``to_module``: the layer does to its input what the fit did to the
+    views (FewViewEigenspace: its unit_norm; Eigenspace and KernelEigenspace fit the rows as
+    given, so False); an explicit unit_norm overrides it either way."""
+    seeds = rand(2, 4, 1, 8, 8, seed=3)
+    for unit in (True, False):
+        est = FewViewEigenspace(3, synth=None, unit_norm=unit).fit(seeds, [0.0, 10.0, 20.0, 30.0])
+        assert est.to_module().unit_norm is unit and est.recognizer_.projection.unit_norm is unit
+        assert est.to_module(unit_norm=not unit).unit_norm is (not unit)
+    rows = seeds.flatten(0, 1)
+    for space in (Eigenspace(3).fit(rows), KernelEigenspace(3, kernel="rbf").fit(rows)):
+        assert space.to_module().unit_norm is False
+        assert space.to_module(unit_norm=True).unit_norm is True

@@ -16,11 +16,12 @@ from collections.abc import Mapping, Sequence
 
 from torch_eigview.apps.cli_args import (
     MIN_OPSET,
+    ArgumentParser,
     HelpFormatter,
     add_quiet,
     add_threads,
+    angle_arg,
     bounded_int_arg,
-    finite_arg,
     opset_arg,
     progress_bar,
 )
@@ -53,7 +54,9 @@ over every object's views, and new images are recognized by their nearest galler
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="eigview", description=DESCRIPTION, formatter_class=HelpFormatter)
+    parser: argparse.ArgumentParser = ArgumentParser(
+        prog="eigview", description=DESCRIPTION, formatter_class=HelpFormatter
+    )
     parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_coil_command(sub)
@@ -68,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
     )
     demo.add_argument(
-        "--alpha", type=finite_arg("--alpha"), default=10.0, help="angle between the two seed views, degrees"
+        "--alpha", type=angle_arg("--alpha"), default=10.0, help="angle between the two seed views, degrees"
     )
     demo.add_argument(
         "--size",
@@ -196,6 +199,23 @@ def _show_warning(message: Warning | str, category: type[Warning], *_: object, *
     print(f"eigview: warning: {message}", file=sys.stderr)
 
 
+def _run_fit_on_ranks(args: argparse.Namespace) -> int:
+    """``eigview fit``, under ``torchrun --nproc-per-node N`` on every rank: the objects are
+    split over the ranks (scale/ranks.py), rank 0 reports and writes the model, and each
+    rank takes its share of the CPUs unless ``--threads`` says otherwise."""
+    from torch_eigview.apps.torchrun import torchrun_group
+    from torch_eigview.scale.parallel import available_cpus
+    from torch_eigview.scale.ranks import world
+    from torch_eigview.scale.thread_policy import threads
+
+    with torchrun_group() as rank:
+        size = world()[1]
+        args.quiet = args.quiet or rank > 0
+        share = args.threads if args.threads is not None or size == 1 else max(1, available_cpus() // size)
+        with threads(share):
+            return run_fit(args)
+
+
 def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     try:
         runs = {
@@ -204,6 +224,8 @@ def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             "evaluate": run_evaluate,
             "demo": _run_demo,
         }
+        if args.command == "fit":
+            return _run_fit_on_ranks(args)
         if args.command in runs:
             from torch_eigview.scale.thread_policy import threads
 
@@ -221,6 +243,9 @@ def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         ImportError,
     ) as exc:  # OSError: an output that failed to write (disk full); ImportError: a missing extra, whose message names the pip install
         parser.exit(2, f"eigview: error: {exc}\n")
+    except KeyboardInterrupt as exc:  # Ctrl-C: the writers' message (no previous file lost), no traceback
+        said = f": {exc}" if str(exc) else ""
+        parser.exit(130, f"eigview: interrupted{said}\n")
     return 1
 
 

@@ -15,22 +15,23 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
     HelpFormatter,
     add_quiet,
     add_threads,
+    angle_arg,
     bounded_int_arg,
     components_arg,
-    finite_arg,
+    gamma_arg,
     progress_bar,
 )
 from torch_eigview.apps.coil_command import add_synthesis_arguments, synthesis_options
+from torch_eigview.apps.device_option import add_device_argument, resolve_device
 from torch_eigview.apps.seed_plan import (
-    SeedPlan,
     held_out_thetas,
-    pick_seeds,
     reject_poses,
     seed_plan,
     synth_record,
@@ -42,16 +43,12 @@ from torch_eigview.apps.view_options import (
     check_not_views,
     load_manifest,
     manifest_inputs,
-    resolve_background,
 )
 from torch_eigview.files import check_outputs
 from torch_eigview.parse import parse_float
 
 if TYPE_CHECKING:
-    import torch
-
-    from torch_eigview.datasets.background import BackgroundModel
-    from torch_eigview.datasets.manifest import ViewEntry
+    from torch_eigview.io.preprocessing import Preprocessing
 
 __all__ = ["add_fit_command", "run_fit"]
 
@@ -70,7 +67,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     seeds = fit.add_mutually_exclusive_group(required=True)
     seeds.add_argument(
         "--seeds",
-        type=finite_arg("--seeds"),
+        type=angle_arg("--seeds"),
         nargs="+",
         metavar="DEG",
         help="azimuths of the seed views, degrees: two or more, e.g. 0 10",
@@ -79,14 +76,17 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--circle",
         type=bounded_int_arg("--circle", 3),
         metavar="M",
-        help="the full circle: M >= 3 seed views 360/M degrees apart from --center, every sector synthesized",
+        help="the full circle: M >= 4 seed views 360/M degrees apart from --center, every sector synthesized",
     )
     fit.add_argument(
-        "--center", type=finite_arg("--center"), default=0.0, help="with --circle: the first seed's azimuth"
+        "--center",
+        type=angle_arg("--center"),
+        default=None,
+        help="with --circle: the first seed's azimuth (default 0)",
     )
     fit.add_argument(
         "--synth",
-        type=finite_arg("--synth"),
+        type=angle_arg("--synth"),
         nargs=3,
         default=None,
         metavar=("START", "STOP", "STEP"),
@@ -115,6 +115,25 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "-k", "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
     )
     add_synthesis_arguments(fit)
+    fit.add_argument(
+        "--kernel",
+        choices=("rbf", "poly", "cosine", "linear"),
+        default=None,
+        help="kernel PCA instead of the linear eigenspace (saved, exported and predicted as a linear one)",
+    )
+    fit.add_argument(
+        "--gamma",
+        type=gamma_arg,
+        default=None,
+        help="with --kernel rbf or poly: the kernel's gamma > 0, or 'median' (rbf: 1/median squared "
+        "distance); 1/N by default",
+    )
+    fit.add_argument(
+        "--degree",
+        type=bounded_int_arg("--degree", 1),
+        default=None,
+        help="with --kernel poly: its degree (3)",
+    )
     fit.add_argument("--no-unit-norm", action="store_true", help="do not L2-normalize views")
     fit.add_argument(
         "--reject-rate",
@@ -129,7 +148,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     fit.add_argument(
         "--reject-poses",
-        type=finite_arg("--reject-poses"),
+        type=angle_arg("--reject-poses"),
         nargs=3,
         default=None,
         metavar=("START", "STOP", "STEP"),
@@ -146,6 +165,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "(its exact eigenspace), a larger one merged block by block, so that memory does not grow "
         "with the objects",
     )
+    add_device_argument(fit, "the synthesis and the eigenspace run")
     fit.add_argument("--out", required=True, metavar="FILE", help="the model file to write")
     add_quiet(fit)
     add_threads(fit)
@@ -162,63 +182,34 @@ def _rate_arg(text: str) -> float:
     return value
 
 
-def _read_seeds(
-    entries: list[ViewEntry],
-    size: tuple[int, int] | None,
-    channels: int | None,
-    background: BackgroundModel | None = None,
-) -> tuple[torch.Tensor, torch.Tensor | None]:
-    """The seed views (V, C, H, W) and, with ``background``, their masks (V, H, W) (else
-    None); without ``size`` they must share the first one's size."""
-    import torch
-
-    from torch_eigview.datasets.image_views import read_view
-
-    read = [
-        read_view(e.path, e.mask, size=size, channels=channels, source=e.source, background=background)
-        for e in entries
-    ]
-    for e, (image, _) in zip(entries, read, strict=True):
-        if image.shape != read[0][0].shape:
-            raise ValueError(
-                f"{e.source}: image {e.path} is (C, H, W)={tuple(image.shape)}, the first seed view "
-                f"{entries[0].path} {tuple(read[0][0].shape)}; give --size H W (and --channels) to resize them"
-            )
-    views = torch.stack([image for image, _ in read])
-    return views, None if background is None else torch.stack([mask[0] for _, mask in read])
+def _check_kernel_args(args: argparse.Namespace) -> None:
+    """--gamma and --degree go with the kernels that use them, before any image is read."""
+    kernel = args.kernel
+    if args.gamma is not None and kernel not in ("rbf", "poly"):
+        raise ValueError(f"--gamma {args.gamma} needs --kernel rbf or poly, got --kernel {kernel}")
+    if isinstance(args.gamma, float) and not 0.0 < args.gamma < math.inf:
+        raise ValueError(f"--gamma must be a finite number > 0 or 'median', got {args.gamma:g}")
+    if args.gamma == "median" and kernel != "rbf":
+        raise ValueError(f"--gamma median is a bandwidth for --kernel rbf only, got --kernel {kernel}")
+    if args.degree is not None and kernel != "poly":
+        raise ValueError(f"--degree {args.degree} needs --kernel poly, got --kernel {kernel}")
 
 
-def _seed_angles(plan: SeedPlan) -> list[float]:
-    """The seed views' angles as the estimator takes them: from the first seed's wrapped
-    azimuth on, each the signed step from the one before (the gallery's poses are the
-    first plus the synthesized offsets)."""
-    if plan.thetas is None:
-        alpha = 360.0 / len(plan.azimuths)
-        return [plan.first + k * alpha for k in range(len(plan.azimuths))]
-    angles = [plan.first]
-    for step in plan.steps:
-        angles.append(angles[-1] + step)
-    return angles
-
-
-def _rule(fields: dict[str, object]) -> str:
+def _rule(prep: Preprocessing) -> str:
     """The background rule as --background spells it."""
-    colour = fields["colour"]
-    if fields["background"] == "colour" and isinstance(colour, tuple):
-        return ",".join(f"{255 * v:g}" for v in colour)
-    return str(fields["background"])
+    if prep.background == "colour" and prep.colour is not None:
+        return ",".join(f"{255 * v:g}" for v in prep.colour)
+    return prep.background
 
 
 def run_fit(args: argparse.Namespace) -> int:
     """Runs ``eigview fit`` on parsed arguments; returns the exit status."""
-    from torch_eigview.datasets.background import background_rule
+    from torch_eigview.datasets.seed_views import read_seed_views
     from torch_eigview.geometry.angles import AROUND_SEEDS
-    from torch_eigview.io.checkpoint import save_recognizer
-    from torch_eigview.io.images import read_image
-    from torch_eigview.io.preprocessing import Preprocessing
     from torch_eigview.method.estimator import FewViewEigenspace
     from torch_eigview.method.memory import MemoryBudgetError
     from torch_eigview.scale.parallel import object_workers
+    from torch_eigview.scale.ranks import world
     from torch_eigview.synthesis import Circle
 
     check_outputs([("--out", args.out)], inputs=manifest_inputs(args))
@@ -229,29 +220,39 @@ def run_fit(args: argparse.Namespace) -> int:
             f"--reject-poses {' '.join(f'{v:g}' for v in args.reject_poses)} cannot be placed round the full "
             "circle (--circle): its rejection is calibrated on the midpoints between gallery views"
         )
+    _check_kernel_args(args)
+    device = resolve_device(args.device)  # no CUDA: named before any image is read
     given = None if args.reject_poses is None else tuple(args.reject_poses)
     held_poses = None if args.reject_rate is None else reject_poses(plan, given)
     held_out_thetas(plan, held_poses)  # names a bad --reject-poses before any image is read
     manifest = load_manifest(args)
     check_not_views([("--out", args.out)], manifest)
     objects = manifest.objects
-    picked = {obj: pick_seeds(manifest, obj, plan.azimuths) for obj in objects}  # all checked first
     size = None if args.size is None else (args.size[0], args.size[1])
-    first, _ = _read_seeds(picked[objects[0]][:1], size, args.channels)  # the size and channels
-    if min(first.shape[2:]) < 2:  # the flow takes image gradients
-        entry = picked[objects[0]][0]
-        raise ValueError(
-            f"{entry.source}: image {entry.path} is (H, W)={tuple(first.shape[2:])}, smaller than 2 x 2: "
-            "give --size H W to resize the views"
+    tolerance = None if args.tolerance is None else args.tolerance / 255.0
+    try:  # the reading Python's FewViewEigenspace.fit_manifest does: one path
+        seeds = read_seed_views(
+            manifest,
+            plan.azimuths,
+            size=size,
+            channels=args.channels,
+            background=args.background,
+            tolerance=tolerance,
         )
-    size, channels = size or (first.shape[2], first.shape[3]), args.channels or first.shape[1]
-    alpha = read_image(picked[objects[0]][0].path, keep_alpha=True).shape[0] in (2, 4)
-    why = resolve_background(args, any(e.mask is not None for e in manifest), alpha)
-    fields = background_fields(args)
+    except ValueError as exc:
+        raise ValueError(
+            str(exc)
+            .replace("give size=(H, W)", "give --size H W")
+            .replace("(and channels)", "(and --channels)")
+        ) from None
+    if device.type != "cpu":  # the estimator works where the seed views are
+        seeds = replace(
+            seeds,
+            views=[v.to(device) for v in seeds.views],
+            masks=[None if m is None else m.to(device) for m in seeds.masks],
+        )
+    prep = seeds.preprocessing
     unit_norm = not args.no_unit_norm
-    prep = Preprocessing((int(size[0]), int(size[1])), int(channels), unit_norm=unit_norm, **fields)
-    background = background_rule(prep.background, prep.colour, prep.tolerance)
-    read = [_read_seeds(picked[obj], size, channels, background) for obj in objects]
     est = FewViewEigenspace(
         args.components,
         synth=Circle(plan.step)
@@ -259,6 +260,9 @@ def run_fit(args: argparse.Namespace) -> int:
         else (AROUND_SEEDS if args.synth is None else tuple(args.synth)),
         options=synthesis_options(args),
         unit_norm=unit_norm,
+        kernel=args.kernel,
+        gamma=args.gamma,
+        degree=3 if args.degree is None else args.degree,
         reject_rate=args.reject_rate,
         reject_poses=AROUND_SEEDS if given is None else given,
         # One thread per CPU, a few objects each (torch's kernels release the GIL); in order.
@@ -266,13 +270,7 @@ def run_fit(args: argparse.Namespace) -> int:
         max_views=args.max_views,
     )
     try:
-        est.fit(
-            [views for views, _ in read],
-            _seed_angles(plan),
-            labels=objects,
-            masks=[masks for _, masks in read],
-            progress=progress_bar(args.quiet, "fit objects", "obj"),
-        )
+        est.fit_manifest(seeds, progress=progress_bar(args.quiet, "fit objects", "obj"))
     except MemoryBudgetError as exc:  # before any synthesis: say what the command line can change
         raise MemoryBudgetError(
             exc.estimate,
@@ -308,7 +306,6 @@ def run_fit(args: argparse.Namespace) -> int:
     n_views = int(est.gallery_labels_.shape[0])
     meta = {
         "command": "fit",
-        "preprocessing": prep.to_json(),
         "seed_azimuths": plan.azimuths,
         "synth": synth_record(args.synth, plan),
         "n_train_views": n_views,
@@ -316,14 +313,19 @@ def run_fit(args: argparse.Namespace) -> int:
         "reject_poses": None if held_poses is None else list(held_poses),
         "manifest": manifest.name,
     }
-    save_recognizer(args.out, est.recognizer_, meta)
+    if world()[0] != 0:  # under torchrun every rank holds the same model: rank 0 writes it
+        return 0
+    est.save(args.out, meta)  # with the preprocessing of the views it read
     k = est.recognizer_.projection.n_components
-    rejects = (
-        "" if args.reject_rate is None else f", rejection calibrated on {est.n_calibration_views_} views"
-    )
+    rejects = ""
+    if args.reject_rate is not None:
+        estimate = est.reject_rate_estimate_
+        rejects = f", rejection calibrated on {est.n_calibration_views_} views" + (
+            "" if estimate is None else f" (estimated {estimate:.1%} of known views rejected)"
+        )
     print(
         f"wrote {args.out}: {len(objects)} objects, {n_views} gallery views of (C, H, W)={est.image_shape_}, "
         f"k={k}, seeds at {', '.join(f'{a:g}' for a in plan.azimuths)} degrees{rejects}; "
-        f"background {_rule(fields)} ({why})"
+        f"background {_rule(prep)} ({seeds.reason})"
     )
     return 0

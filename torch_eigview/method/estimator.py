@@ -19,8 +19,10 @@ It follows scikit-learn's conventions: hyperparameters are stored as given by
 
 from __future__ import annotations
 
+import os
 import time
-from collections.abc import Callable, Hashable, Iterable, Iterator
+from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import torch
@@ -32,6 +34,7 @@ from torch_eigview.decomposition.kernel import KernelEigenspace
 from torch_eigview.decomposition.streaming import StreamingEigenspace
 from torch_eigview.errors import NotFittedError
 from torch_eigview.geometry.angles import AROUND_SEEDS, held_out_range, off_gallery
+from torch_eigview.io.preprocessing import Preprocessing
 from torch_eigview.method.gallery import GalleryFit
 from torch_eigview.method.inputs import (
     Params,
@@ -50,13 +53,19 @@ from torch_eigview.method.inputs import (
     wrap_degrees,
 )
 from torch_eigview.method.memory import check_memory, fit_estimate
-from torch_eigview.method.rejection import REJECT_SCORES, calibrate_rejection, check_reject_rate
+from torch_eigview.method.rejection import (
+    REJECT_SCORES,
+    calibrate_rejection,
+    check_reject_rate,
+    estimate_reject_rate,
+)
 from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer, Recognition
 from torch_eigview.scale.galleries import ObjectJob, object_galleries
 from torch_eigview.scale.parallel import KINDS, group_size
+from torch_eigview.scale.ranks import gather_in_rank_order, object_shard
 from torch_eigview.synthesis import Circle, SynthesisOptions, SynthesizedViews, circle_thetas
 
 __all__ = ["MEMORY_REMEDIES", "FewViewEigenspace"]
@@ -86,10 +95,14 @@ class FewViewEigenspace:
             or any gallery of real views). At most 3600 views per object.
         options: :class:`~torch_eigview.synthesis.SynthesisOptions` (flow, elevation,
             extent, blend, silhouette, …); None for the defaults.
-        unit_norm: scale every view to unit L2 norm before the eigenspace and in the layer.
+        unit_norm: scale every view to unit L2 norm before the eigenspace and in the layer
+            (``to_module()`` gives a layer that does so, as every ``to_module`` gives the
+            layer what its fit did to the views; an ``Eigenspace`` fits the rows as given,
+            so its layer's default is False).
         kernel: None for the linear eigenspace (the paper's), or a
             :class:`~torch_eigview.decomposition.kernel.KernelEigenspace` kernel name.
         gamma: the kernel's γ (a number, "median" for rbf, or None: 1/N).
+        degree: the degree of the ``"poly"`` kernel, an int >= 1 (other kernels ignore it).
         synth_follows_seeds: with more than two seeds, extend a (start, stop, step) ``synth`` on the seeds'
             side by the steps past the first pair (as ``CoilExperiment``).
         max_views: the most gallery views held at once. ``fit`` fits a gallery of at most
@@ -134,6 +147,14 @@ class FewViewEigenspace:
         seconds_: time spent in ``"correspondence"``, ``"synthesis"`` and ``"eigen"``.
         n_calibration_views_: the held-out views the rejection was calibrated on (0
             without ``reject_rate``).
+        reject_rate_estimate_: the calibration's own estimate of the fraction of known
+            views it rejects: each object's held-out views judged by the thresholds set
+            on the other objects' (:func:`~torch_eigview.method.rejection.estimate_reject_rate`);
+            None without ``reject_rate`` or with one object.
+        preprocessing_, seed_azimuths_: after :meth:`fit_manifest`, what every image file
+            goes through (:class:`~torch_eigview.io.preprocessing.Preprocessing`, used by
+            :meth:`predict_files` and recorded by :meth:`save`) and the seed azimuths;
+            None after :meth:`fit` or :meth:`fit_blocks` on tensors.
 
     Example:
         >>> seeds = torch.rand(2, 2, 1, 16, 16)  # 2 objects, seed views at 0 and 10 degrees
@@ -141,6 +162,9 @@ class FewViewEigenspace:
         >>> est.predict(seeds[1]).labels.tolist()
         [7, 7]
     """
+
+    preprocessing_: Preprocessing | None
+    seed_azimuths_: list[float] | None
 
     def __init__(
         self,
@@ -151,6 +175,7 @@ class FewViewEigenspace:
         unit_norm: bool = True,
         kernel: str | None = None,
         gamma: float | str | None = None,
+        degree: int = 3,
         synth_follows_seeds: bool = True,
         max_views: int = 4096,
         reject_rate: float | None = None,
@@ -166,6 +191,7 @@ class FewViewEigenspace:
         self.unit_norm = unit_norm
         self.kernel = kernel
         self.gamma = gamma
+        self.degree = degree
         self.synth_follows_seeds = synth_follows_seeds
         self.max_views = max_views
         self.reject_rate = reject_rate
@@ -186,9 +212,13 @@ class FewViewEigenspace:
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.kernel is not None:
-            KernelEigenspace(n_components, kernel=self.kernel, gamma=self.gamma)  # validates both
+            # Validates the kernel, gamma and degree.
+            space = KernelEigenspace(n_components, kernel=self.kernel, gamma=self.gamma, degree=self.degree)
+            space._validate_params()  # stored as given: checked here, before any synthesis
         elif self.gamma is not None:
             raise ValueError(f"gamma={self.gamma!r} needs a kernel (kernel is None)")
+        elif self.degree != 3:
+            raise ValueError(f"degree={self.degree!r} needs kernel='poly' (kernel is None)")
         return Params(
             n_components,
             check_synth(self.synth, around=True),
@@ -201,6 +231,7 @@ class FewViewEigenspace:
             check_int(self.workers, "workers", minimum=0),
             check_choice(self.worker_kind, "worker_kind", KINDS),
             self._max_rank(n_components),
+            degree=self.degree,
         )
 
     def _max_rank(self, n_components: int | float) -> int:
@@ -303,22 +334,106 @@ class FewViewEigenspace:
             )
             check_memory(estimate, MEMORY_REMEDIES)
         gallery = GalleryFit(params, sum(g for g, _ in sizes), len(objects))
-        ticks = names if names is not None else label_list
+        # In a process group each rank synthesizes its own share of the objects, and the
+        # shares' galleries are gathered in rank order before the model (scale/ranks.py).
+        shard = object_shard(len(objects))
+        mine = [objects[i] for i in shard], [angles[i] for i in shard], [label_list[i] for i in shard]
+        ticks = [(names if names is not None else label_list)[i] for i in shard]
         for block, label, block_poses, held in self._galleries(
-            params, objects, angles, label_list, plans, held_poses, progress(ticks) if progress else ticks
+            params,
+            *mine,
+            None if plans is None else [plans[i] for i in shard],
+            held_poses,
+            progress(ticks) if progress else ticks,
         ):
             t0 = time.perf_counter()
             gallery.add(block, label, block_poses, held)
             self.seconds_["eigen"] += time.perf_counter() - t0
         t0 = time.perf_counter()
+        if len(shard) < len(objects):
+            gallery.gather()
+            self.elevations_ = [e for part in gather_in_rank_order(self.elevations_) for e in part]
         space, projection, recognizer = gallery.finish(names)
         assert gallery.image_shape is not None
         self._set_fitted(space, projection, recognizer, gallery.image_shape)
         self.seconds_["eigen"] += time.perf_counter() - t0
         self.n_calibration_views_ = sum(v.shape[0] for v in gallery.held_out)
+        self.reject_rate_estimate_: float | None = None
         if reject is not None:
             with torch.no_grad():
-                calibrate_rejection(self.recognizer_, torch.cat(gallery.held_out), reject[0], reject[1])
+                held_views = torch.cat(gallery.held_out)
+                calibrate_rejection(self.recognizer_, held_views, reject[0], reject[1])
+                if len(gallery.held_out) > 1:  # each object's views by the others' thresholds
+                    groups = torch.arange(len(gallery.held_out)).repeat_interleave(
+                        torch.tensor([v.shape[0] for v in gallery.held_out])
+                    )
+                    self.reject_rate_estimate_ = estimate_reject_rate(
+                        self.recognizer_, held_views, groups, reject[0], reject[1]
+                    )
+        return self
+
+    def fit_manifest(
+        self,
+        views: object,
+        seeds: Sequence[float] | None = None,
+        *,
+        size: Sequence[int] | None = None,
+        channels: int | None = None,
+        background: str | Sequence[float] | None = None,
+        tolerance: float | None = None,
+        progress: Callable[[Iterable[Any]], Iterable[Any]] | None = None,
+    ) -> FewViewEigenspace:
+        """Fits on every object of a manifest from its views at the seed azimuths, as ``eigview fit`` does.
+
+        The views are read by :func:`~torch_eigview.datasets.seed_views.read_seed_views`
+        (the command's own path), which settles the preprocessing every later image needs:
+        :meth:`predict_files` applies it and :meth:`save` records it, so that ``eigview
+        predict --model`` and ``eigview evaluate`` read images the same way.
+
+        Args:
+            views: a :class:`~torch_eigview.datasets.ViewManifest`, a
+                :class:`~torch_eigview.datasets.ViewDataset` (its size and channels), or
+                :class:`~torch_eigview.datasets.seed_views.SeedViews` already read (then
+                ``seeds`` and the reading options are not given).
+            seeds: two or more seed azimuths in degrees (round the circle, with
+                ``synth="circle"``: M >= 3 azimuths 360/M apart); the object names become
+                ``label_names_``.
+            size, channels, background, tolerance: as
+                :func:`~torch_eigview.datasets.seed_views.read_seed_views` takes them:
+                ``(H, W)``; 1 or 3; ``"keep"``, ``"auto"``, a colour in [0, 1] or None
+                (``"auto"`` where the views have masks, else ``"keep"``); a colour distance.
+            progress: as :meth:`fit`'s.
+
+        Returns:
+            self, fitted, with ``preprocessing_`` and ``seed_azimuths_`` set.
+
+        Raises:
+            TypeError, ValueError: a bad argument (named), or a view that cannot be read.
+        """
+        from torch_eigview.datasets.seed_views import SeedViews, read_seed_views
+
+        if isinstance(views, SeedViews):
+            given = {"seeds": seeds, "size": size, "channels": channels, "background": background}
+            extra = [name for name, value in {**given, "tolerance": tolerance}.items() if value is not None]
+            if extra:
+                raise ValueError(
+                    f"{', '.join(extra)} cannot be given with SeedViews: they were read with theirs"
+                )
+            read = views
+        else:
+            if seeds is None:
+                raise TypeError("fit_manifest needs seeds, the seed azimuths in degrees (e.g. [0, 10])")
+            read = read_seed_views(
+                views,  # type: ignore[arg-type]  # read_seed_views names a wrong type
+                seeds,
+                size=size,
+                channels=channels,
+                background=background,
+                tolerance=tolerance,
+            )
+        self.fit(read.views, read.angles, labels=read.objects, masks=read.masks, progress=progress)
+        self.preprocessing_ = replace(read.preprocessing, unit_norm=bool(self.unit_norm))
+        self.seed_azimuths_ = list(read.azimuths)
         return self
 
     @staticmethod
@@ -447,6 +562,8 @@ class FewViewEigenspace:
         self.gallery_poses_ = recognizer.poses
         self.label_names_ = recognizer.label_names
         self.image_shape_ = image_shape
+        self.preprocessing_ = None  # fit_manifest sets them
+        self.seed_azimuths_ = None
 
     def fit_blocks(self, blocks: object) -> FewViewEigenspace:
         """Fits on gallery views that arrive block by block, never all in memory.
@@ -470,7 +587,12 @@ class FewViewEigenspace:
                 in the same order. A one-shot iterator (a generator) is collected in
                 memory first. Each item: (B, C, H, W) views, or ``(views, labels)`` or
                 ``(views, labels, poses)`` with (B,) int labels and poses in degrees; a bare
-                tensor's views take the block's index as label and pose 0.
+                tensor's views take the block's index as label and pose 0. Or a dict as a
+                :class:`~torch_eigview.datasets.ViewDataset` yields it (one view; so the
+                dataset itself is a valid ``blocks``) or as a ``DataLoader`` over one
+                collates it: ``image`` the views, ``object`` the names (numbered in order
+                of first appearance; they become ``label_names_``), ``azimuth`` the poses.
+                The ``mask`` is not read: give the dataset a ``background`` to apply it.
 
         Returns:
             self, fitted as by :meth:`fit` (``elevations_`` empty).
@@ -498,17 +620,30 @@ class FewViewEigenspace:
             image_shape = space.image_shape_
             projection = space.to_module(unit_norm=params.unit_norm, image_shape=image_shape)
             codes, labels, poses = [], [], []
+            names: dict[str, int] = {}  # object name → label, for dict blocks (ViewDataset items)
+            dicts = set()
             for i, item in enumerate(source()):
-                views, block_labels, block_poses = block_item(item, i)
+                views, block_labels, block_poses = block_item(item, i, names)
+                dicts.add(isinstance(item, Mapping))
                 codes.append(projection(views))
                 labels.append(block_labels)
                 poses.append(block_poses.to(views.dtype))
+            if names and len(dicts) > 1:
+                raise ValueError(
+                    "blocks mixes ViewDataset items (dicts, labelled by object name) with tensors or tuples "
+                    "(labelled by int): give every block one way"
+                )
             recognizer = NearestNeighborRecognizer(
-                projection, torch.cat(codes), torch.cat(labels), wrap_degrees(torch.cat(poses))
+                projection,
+                torch.cat(codes),
+                torch.cat(labels),
+                wrap_degrees(torch.cat(poses)),
+                label_names=list(names) or None,
             )
         self.elevations_ = []
         self.seconds_ = {}
         self.n_calibration_views_ = 0
+        self.reject_rate_estimate_ = None
         self._set_fitted(space, projection, recognizer, image_shape)
         return self
 
@@ -532,10 +667,82 @@ class FewViewEigenspace:
             return projection(views)
 
     def to_module(self, unit_norm: bool | None = None) -> EigenProjection | KernelProjection:
-        """A copy of the fitted layer; ``unit_norm`` (None: as fitted) sets whether it scales
-        each view to unit L2 norm first (False: the caller's views must be unit-norm already)."""
+        """A copy of the fitted layer; ``unit_norm`` (None, the default: as fitted, this
+        estimator's ``unit_norm``) sets whether it scales each view to unit L2 norm first
+        (False: the caller's views must be unit-norm already)."""
         self._fitted("to_module")
         unit = self.projection_.unit_norm if unit_norm is None else unit_norm
         if isinstance(self.eigenspace_, KernelEigenspace):
             return self.eigenspace_.to_module(unit_norm=unit)
         return self.eigenspace_.to_module(unit_norm=unit, image_shape=self.image_shape_)
+
+    # ------------------------------------------------------------------ files
+    def _preprocessing(self, what: str) -> Preprocessing:
+        """``preprocessing_``, or for a fit on tensors the images' own size and channels as read."""
+        self._fitted(what)
+        if self.preprocessing_ is not None:
+            return self.preprocessing_
+        c, h, w = self.image_shape_
+        if c not in (1, 3):
+            raise ValueError(
+                f"{what} reads gray or RGB image files; this model takes (C, H, W)={self.image_shape_}: "
+                "fit it with fit_manifest, or read the images yourself"
+            )
+        return Preprocessing((h, w), c, unit_norm=bool(self.projection_.unit_norm))
+
+    def predict_files(
+        self, paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], *, reject: bool = False
+    ) -> Recognition:
+        """Recognizes image files, each read through the model's preprocessing
+        (:func:`~torch_eigview.datasets.seed_views.read_images`; ``preprocessing_`` after
+        :meth:`fit_manifest`, else the fitted size and channels with the pixels as read), as
+        ``eigview predict --model`` does with the saved model.
+
+        Returns:
+            As :meth:`predict`: (B,) labels (``label_names_[label]`` is the object's name),
+            poses, distances, gallery indices and, with ``reject``, ``known``.
+        """
+        from torch_eigview.datasets.seed_views import read_images
+
+        recognizer = self._fitted("predict_files")
+        images = read_images(paths, self._preprocessing("predict_files"), dtype=recognizer.codes.dtype)
+        return self.predict(images.to(recognizer.codes.device), reject=reject)
+
+    def save(self, path: str | os.PathLike[str], metadata: Mapping[str, Any] | None = None) -> None:
+        """Writes the fitted model to one file in ``eigview fit``'s format: ``eigview predict
+        --model``, ``evaluate`` and ``export`` take it, and :func:`torch_eigview.io.load_model`
+        reads it back.
+
+        The file holds the recognizer (checksummed, written atomically:
+        :func:`~torch_eigview.io.checkpoint.save_recognizer`) and the preprocessing
+        (:meth:`fit_manifest`'s, else the fitted size and channels with the pixels kept as
+        read), the label names and the seed azimuths.
+
+        Args:
+            path: the model file.
+            metadata: further JSON values recorded with it (they override the defaults).
+
+        Raises:
+            NotFittedError: not fitted yet.
+            TypeError: a kernel eigenspace, which this file format does not hold, or
+                non-JSON ``metadata``.
+            ValueError: ``path`` cannot be written.
+        """
+        from torch_eigview.io.checkpoint import save_recognizer
+
+        recognizer = self._fitted("save")
+        if metadata is not None and not isinstance(metadata, Mapping):
+            raise TypeError(
+                f"metadata must be a mapping of JSON values or None, got {type(metadata).__name__}"
+            )
+        meta: dict[str, Any] = {
+            "command": "python",
+            "preprocessing": self._preprocessing("save").to_json(),
+            "n_train_views": int(recognizer.codes.shape[0]),
+            "reject_rate": self.reject_rate,
+        }
+        if self.seed_azimuths_ is not None:
+            meta["seed_azimuths"] = list(self.seed_azimuths_)  # evaluate --exclude-seeds reads them
+        meta.update(metadata or {})
+        # By keyword: the call does not depend on save_recognizer's argument order.
+        save_recognizer(recognizer=recognizer, path=path, metadata=meta)

@@ -24,6 +24,7 @@ from torch_eigview.nn.functional import unit_rows
 from torch_eigview.nn.kernel_projection import KernelProjection
 from torch_eigview.nn.projection import EigenProjection
 from torch_eigview.nn.recognition import NearestNeighborRecognizer
+from torch_eigview.scale.ranks import gather_in_rank_order, world
 from torch_eigview.scale.thread_policy import eigen_flops, for_products
 
 __all__ = ["GalleryFit", "held_out_quota"]
@@ -62,12 +63,17 @@ class GalleryFit:
             else None
         )
         self.image_shape: tuple[int, int, int] | None = None
+        # A rank's model is merged with the others' at the end: in float64, whose codes
+        # survive that merge exactly (a float32 basis would round them 1e-4 apart).
+        self.ranked = world()[1] > 1
+        self.dtype: torch.dtype | None = None
 
     def add(self, views: torch.Tensor, label: int, poses: list[float], held_out: torch.Tensor | None) -> None:
         """One object's (T, C, H, W) gallery views, their label and T poses (degrees), and its
         views held out for rejection (or None)."""
         c, h, w = views.shape[1:]
         self.image_shape = (c, h, w)
+        self.dtype = views.dtype
         self.labels += [label] * len(poses)
         self.poses += poses
         if held_out is not None and held_out.shape[0]:
@@ -91,12 +97,51 @@ class GalleryFit:
         assert self.model is not None
         if self.views:
             block = torch.cat(self.views)
+            block = block.double() if self.ranked else block
             rank = self.params.max_rank
             # The merge's products: the block's Gram, its coordinates in the basis and the new basis.
             flops = block.shape[1] * (block.shape[0] + rank) ** 2
             with torch.no_grad(), for_products(flops):
                 self.model.partial_fit(block)
         self.views, self.waiting = [], 0
+
+    def gather(self) -> None:
+        """Makes the galleries of every rank of the process group this one, in rank order
+        (a no-op without a group): a held gallery by its views, a merged one by its
+        eigenspace model (:meth:`IncrementalEigenspace.merge`), with the labels, poses and
+        held-out views. Every rank then holds what one process fitting every object would."""
+        parts = gather_in_rank_order(self._portable())
+        if len(parts) == 1:
+            return
+        first = next(p for p in parts if p["image_shape"] is not None)
+        self.image_shape = first["image_shape"]
+        self.labels = [label for p in parts for label in p["labels"]]
+        self.poses = [pose for p in parts for pose in p["poses"]]
+        self.held_out = [v for p in parts for v in p["held_out"]]
+        if self.model is None:
+            self.views = [v for p in parts for v in p["views"]]
+            return
+        model = IncrementalEigenspace(
+            self.params.n_components, max_rank=self.params.max_rank, keep_codes=True
+        )
+        for p in parts:
+            model.merge(p["model"])
+        self.model = model.report_as(first["dtype"])
+
+    def _portable(self) -> dict[str, object]:
+        """This rank's gallery on the CPU, for :func:`gather_in_rank_order`."""
+        if self.model is not None:
+            self._merge()  # the views still waiting join the model first
+        cpu = lambda xs: [x.cpu() for x in xs]  # noqa: E731
+        return {
+            "image_shape": self.image_shape,
+            "dtype": self.dtype,
+            "labels": self.labels,
+            "poses": self.poses,
+            "held_out": cpu(self.held_out),
+            "views": cpu(self.views) if self.model is None else [],
+            "model": self.model,
+        }
 
     def finish(
         self, names: list[str] | None
@@ -123,7 +168,9 @@ class GalleryFit:
                     space = linear = Eigenspace(params.n_components).fit(x_fit)
                 projection = linear.to_module(unit_norm=params.unit_norm, image_shape=shape)
             else:
-                kspace = KernelEigenspace(params.n_components, kernel=params.kernel, gamma=params.gamma)
+                kspace = KernelEigenspace(
+                    params.n_components, kernel=params.kernel, gamma=params.gamma, degree=params.degree
+                )
                 space = kspace.fit(x_fit.reshape(-1, *shape))
                 projection = kspace.to_module(unit_norm=params.unit_norm)
             poses = wrap_degrees(torch.tensor(self.poses, dtype=x.dtype))
