@@ -110,3 +110,22 @@ def test_onnx_any_scale(tmp_path: Path, seeds: torch.Tensor, fold: bool) -> None
         labels = np.array([1, 2, 3])[out["label_index"]]  # indices into the sorted labels
         assert np.array_equal(labels, ref.labels.numpy()), f"onnx labels at scale {s:g}"
         _close_distances(out["distance"], ref.distances, codes, f"onnx distances at scale {s:g}")
+
+
+@pytest.mark.parametrize("dtype", DTYPES, ids=["float32", "float64"])
+def test_unit_rows_both_paths(dtype: torch.dtype) -> None:
+    """Eagerly, ordinary rows take the plain norm and a batch with a row past it (huge,
+    tiny, all zero) the scaled one: both agree with float64 arithmetic on the rows; a zero
+    row stays zero."""
+    from torch_eigview.nn import unit_rows
+
+    x = _views(3, 2, dtype).flatten(1)
+    want = x.double() / x.double().norm(dim=1, keepdim=True)
+    _close(unit_rows(x), want, "plain rows")
+    for odd in (x[:1] * 1e30, x[:1] * 1e-30, torch.zeros_like(x[:1])):
+        got = unit_rows(torch.cat([x, odd]))
+        _close(got[:3], want, "rows beside an odd one")
+        if not bool(odd.any()):
+            assert not bool(got[3].any())
+        else:
+            _close(got[3], want[0], "the odd row")
