@@ -116,9 +116,10 @@ def test_reject_unknown(coil_root: Path, capsys: pytest.CaptureFixture[str]) -> 
 
 @pytest.mark.slow
 def test_own_photos_small_case() -> None:
-    """Every kind of file (8-bit, 16-bit, RGBA, masks given or estimated) through fit and evaluate."""
+    """Every kind of file (8-bit, 16-bit, RGBA, masks given or estimated) fitted in Python,
+    saved, loaded and predicted on the views other than the seeds."""
     rows = load("own_photos").main(["--objects", "head", "cylinder", "--test", "-10", "20", "--step", "5"])
     assert [r["kind"] for r in rows] == ["black", "masks", "estimated", "16-bit", "rgba"]
     black = rows[0]["accuracy"]
-    assert all(r["n_test"] == 14 and abs(r["accuracy"] - black) <= 100 / 14 for r in rows)  # within one view
+    assert all(r["n_test"] == 10 and abs(r["accuracy"] - black) <= 100 / 10 for r in rows)  # within one view
     assert black >= 90.0
