@@ -7,7 +7,11 @@ ranks' galleries become one (:func:`gather_in_rank_order`): held galleries by th
 views, merged ones by their eigenspace models
 (:meth:`~torch_eigview.decomposition.IncrementalEigenspace.merge`, exact below the rank
 cap). Shares are contiguous and gathered in rank order, so the gallery's views come in
-the objects' own order and every rank ends with the model one process would fit.
+the objects' own order and every rank ends with the model one process would fit: the same
+up to rounding below ``max_rank``; past it one process and the ranks each drop their
+smallest eigenpairs at other merges, both within the reported truncation bound (on
+COIL-20's full circle, 7200 views of 16384 pixels: eigenvalues 1.5e-5 apart, codes 5e-3,
+and the same accuracy).
 
 ``eigview fit`` starts the group itself under ``torchrun``
 (:func:`torch_eigview.apps.torchrun.torchrun_group`, which reads the environment).
