@@ -9,9 +9,7 @@ views, merged ones by their eigenspace models
 cap). Shares are contiguous and gathered in rank order, so the gallery's views come in
 the objects' own order and every rank ends with the model one process would fit: the same
 up to rounding below ``max_rank``; past it one process and the ranks each drop their
-smallest eigenpairs at other merges, both within the reported truncation bound (on
-COIL-20's full circle, 7200 views of 16384 pixels: eigenvalues 1.5e-5 apart, codes 5e-3,
-and the same accuracy).
+smallest eigenpairs at other merges, both within the reported truncation bound.
 
 ``eigview fit`` starts the group itself under ``torchrun``
 (:func:`torch_eigview.apps.torchrun.torchrun_group`, which reads the environment).
