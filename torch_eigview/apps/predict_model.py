@@ -1,8 +1,9 @@
 """``eigview predict --model model.pt``: a model file in torch, with ``eigview predict``'s interface.
 
-The images go through the model's recorded preprocessing exactly as ``eigview evaluate``
-reads its views (:func:`~torch_eigview.datasets.seed_views.read_images`), so a file gives
-the same answer in either command.
+The images go through the model's recorded preprocessing as ``eigview predict --onnx``
+and :meth:`~torch_eigview.io.model.Model.predict_files` read them
+(:func:`~torch_eigview.io.preprocessing.prepare_file`), so a file gives the same answer in
+either runtime and in Python.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ import torch
 from torch_eigview.apps.device_option import resolve_device
 from torch_eigview.apps.prediction import Prediction
 from torch_eigview.datasets.background import background_rule
-from torch_eigview.datasets.seed_views import read_images
 from torch_eigview.io.model import load_model
 from torch_eigview.io.onnx_metadata import OnnxModelInfo
+from torch_eigview.io.preprocessing import prepare_file
 
 __all__ = ["ModelRecognizer"]
 
@@ -60,13 +61,14 @@ class ModelRecognizer:
         """One image as the model's input ``(C, H, W)`` float32, preprocessed as recorded.
 
         The background (unless the model keeps it) is found from the image's alpha channel,
-        else estimated, as ``eigview evaluate`` does for a view without a mask.
+        else estimated, as ``eigview evaluate`` does for a view without a mask
+        (:func:`~torch_eigview.io.preprocessing.prepare_file`).
 
         Raises:
             ValueError: not a regular file, unreadable, an all-background alpha, or a
                 background that leaves no object; the message names it.
         """
-        return read_images(path, self.prep, dtype=torch.float32)[0].numpy()
+        return prepare_file(path, self.prep)
 
     def predict_rows(self, images: np.ndarray, names: Sequence[str]) -> list[Prediction | str]:
         """Recognizes (B, C, H, W) float32 ``images``; ``names`` are their files."""
