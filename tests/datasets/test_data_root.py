@@ -40,7 +40,7 @@ def test_default_is_in_the_home_folder(
         monkeypatch.setenv(DATA_ENV, value)
     assert get_data_home() == tmp_path / "torch_eigview_data"
     checkout = Path(__file__).resolve().parents[2]
-    assert checkout.parent not in get_data_home().parents  # nothing relative to the source tree
+    assert checkout not in get_data_home().parents  # nothing inside the source tree
 
 
 def test_missing_from_env_says_where(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
