@@ -223,3 +223,12 @@ def test_synthesis_framed(coil_root: Path) -> None:
     assert banded["frame"] == 0.5 and not banded["whole_grid"]
     whole = load("bench_synthesis").main([*args, "--whole-grid"])
     assert whole["same_views"] and whole["same_as_whole_grid"] and whole["whole_grid"]
+
+
+@pytest.mark.slow
+def test_fit_ranks_quick(tmp_path: Path) -> None:
+    """Two ranks under torchrun against one process on 4 rendered objects: the same labels."""
+    out = tmp_path / "ranks.json"
+    result = load("bench_fit_ranks").main(["--quick", "--data", str(tmp_path / "data"), "--out", str(out)])
+    check_record(out)
+    assert result["agreement"]["same_label"] == 100.0 and result["agreement"]["codes_rel"] <= 1e-5
