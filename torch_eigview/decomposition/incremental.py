@@ -148,10 +148,10 @@ class IncrementalEigenspace(FittedEigenspace):
         products of size N run in it (float32 data: the speed of a float32 GEMM, rounding
         far below a truncation's), the small matrices, the mean and the eigenproblem in
         float64."""
-        mean_b = x.mean(0, dtype=torch.float64)
+        mean_b, squares = _float64_sums(x)
         xc = x - mean_b.to(x.dtype)
         gram = (xc @ xc.T).double()  # (B, B)
-        self._uncentred += float(x.square().sum(dtype=torch.float64))
+        self._uncentred += squares
         rot_new, shift, n_old, n_new = self._merge_rows(
             xc, mean_b, x.shape[0], gram, float(gram.diagonal().sum()), max_rank
         )
@@ -307,14 +307,15 @@ class IncrementalEigenspace(FittedEigenspace):
         # U' = M V Λ^(-1/2), M = [U diag(√s), Xcᵀ, c] (the first block: M = Xcᵀ).
         shift = None
         if self._basis is None:
-            new_basis = (xc.T @ keep_vec.to(w)) * inv.to(w)
+            new_basis = (xc.T @ keep_vec.to(w)).mul_(inv.to(w))
             rot_new = (gram @ keep_vec) * inv  # (R, r'): the rows' own coordinates
         else:
             assert p is not None and u_c is not None and g is not None and c is not None
             v_old, v_blk, v_c = keep_vec[:r], keep_vec[r : r + rows], keep_vec[r + rows]
-            new_basis = (
-                self._basis @ (root[:, None] * v_old).to(w) + xc.T @ v_blk.to(w) + c[:, None] * v_c.to(w)
-            ) * inv.to(w)
+            # One (N, r') buffer, the products accumulated into it: a sum of three products
+            # would hold four such temporaries at once (N r' floats each, the merge's peak).
+            new_basis = torch.addmm(c[:, None] * v_c.to(w), self._basis, (root[:, None] * v_old).to(w))
+            new_basis.addmm_(xc.T, v_blk.to(w)).mul_(inv.to(w))
             # Uᵀ-free rotations: U'ᵀ U, U'ᵀ d and U'ᵀ Xcᵀ from the small matrices alone.
             rot_old = (v_old * root[:, None] + p @ v_blk + u_c[:, None] * v_c) * inv  # (r, r'): Uᵀ U'
             shift = ((root * u_c) @ v_old + g @ v_blk + cc * v_c) * inv / weight  # (r',): U'ᵀ d
@@ -398,6 +399,19 @@ class IncrementalEigenspace(FittedEigenspace):
             raise ValueError("X must hold at least one view, got none")
         self._fitted("fit")  # the record, or the error of a gallery of rank 0, now
         return self
+
+
+def _float64_sums(x: torch.Tensor) -> tuple[torch.Tensor, float]:
+    """The (N,) mean of (B, N) rows and the sum of their squares, accumulated in float64 a
+    few rows at a time: ``x.mean(0, dtype=torch.float64)`` converts all of ``x`` first (twice
+    its float32 size, more than the rest of a merge holds), these a chunk of about 2 MiB."""
+    total = torch.zeros(x.shape[1], dtype=torch.float64, device=x.device)
+    squares = 0.0
+    for chunk in x.split(max(1, (1 << 18) // max(x.shape[1], 1))):
+        wide = chunk.double()
+        total += wide.sum(0)
+        squares += float(wide.square().sum())
+    return total / x.shape[0], squares
 
 
 def blocks_of_views(

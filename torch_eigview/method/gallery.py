@@ -97,6 +97,7 @@ class GalleryFit:
         assert self.model is not None
         if self.views:
             block = torch.cat(self.views)
+            self.views = []  # the pieces go before the merge, not after it: one copy held
             block = block.double() if self.ranked else block
             rank = self.params.max_rank
             # The merge's products: the block's Gram, its coordinates in the basis and the new basis.
