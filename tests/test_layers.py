@@ -161,7 +161,7 @@ def test_only_the_command_and_the_data_home_read_the_environment() -> None:
     the command line reads EIGVIEW_MAX_*, and the data home TORCH_EIGVIEW_DATA."""
     allowed = {
         ("apps/cli.py", "limits_from_environment"),
-        ("apps/torchrun.py", "torchrun_group"),  # torchrun's RANK and WORLD_SIZE
+        ("apps/cli.py", "ranks_from_environment"),  # torchrun's RANK and WORLD_SIZE
         ("datasets/coil.py", "_data_home"),
     }
     found = set()

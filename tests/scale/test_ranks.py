@@ -14,10 +14,10 @@ import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
 
-from torch_eigview.apps.torchrun import torchrun_group
+from torch_eigview.apps.cli import ranks_from_environment
 from torch_eigview.datasets import OrthographicCamera, make_object, render_views
 from torch_eigview.method import FewViewEigenspace
-from torch_eigview.scale.ranks import object_shard, world
+from torch_eigview.scale.ranks import object_shard, process_group, world
 
 pytestmark = pytest.mark.skipif(not dist.is_available(), reason="torch.distributed not available")
 
@@ -110,16 +110,22 @@ def test_one_process_is_the_whole_share() -> None:
     assert world() == (0, 1) and object_shard(4) == range(0, 4)
 
 
-def test_torchrun_group_without_torchrun_is_a_no_op(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("WORLD_SIZE", raising=False)
-    with torchrun_group() as rank:
+def test_one_process_group_is_a_no_op() -> None:
+    if dist.is_initialized():
+        pytest.skip("a process group is already initialized")
+    with process_group(0, 1) as rank:
         assert rank == 0 and not dist.is_initialized()
-    monkeypatch.setenv("WORLD_SIZE", "two")
-    with pytest.raises(ValueError, match=r"WORLD_SIZE='two' and RANK=.* must be integers"), torchrun_group():
-        pass
-    monkeypatch.setenv("WORLD_SIZE", "1")
     with (
         pytest.raises(ValueError, match=r"backend must be 'gloo' or 'nccl', got 'mpi'"),
-        torchrun_group("mpi"),
+        process_group(0, 1, "mpi"),
     ):
         pass
+    with pytest.raises(ValueError, match=r"rank=2 must lie in \[0, size=2\)"), process_group(2, 2):
+        pass
+
+
+def test_ranks_from_the_environment() -> None:
+    assert ranks_from_environment({}) == (0, 1)
+    assert ranks_from_environment({"RANK": "1", "WORLD_SIZE": "4"}) == (1, 4)
+    with pytest.raises(ValueError, match=r"WORLD_SIZE='two' and RANK='0' must be integers"):
+        ranks_from_environment({"WORLD_SIZE": "two"})

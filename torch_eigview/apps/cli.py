@@ -31,6 +31,7 @@ from torch_eigview.apps.fit_command import add_fit_command, run_fit
 from torch_eigview.config import DEFAULTS, config_context
 from torch_eigview.environment import package_version
 from torch_eigview.files import check_outputs, write_json
+from torch_eigview.parse import parse_int
 
 __all__ = ["main"]
 
@@ -199,17 +200,33 @@ def _show_warning(message: Warning | str, category: type[Warning], *_: object, *
     print(f"eigview: warning: {message}", file=sys.stderr)
 
 
+def ranks_from_environment(environ: Mapping[str, str] | None = None) -> tuple[int, int]:
+    """``(rank, world size)`` from torchrun's ``RANK`` and ``WORLD_SIZE`` (``(0, 1)`` when
+    unset): with :func:`limits_from_environment`, what the command reads of its environment.
+
+    Raises:
+        ValueError: a value that is not an integer; the message names both variables.
+    """
+    env = os.environ if environ is None else environ
+    size_text, rank_text = env.get("WORLD_SIZE", "1"), env.get("RANK", "0")
+    try:
+        return parse_int(rank_text, "RANK"), parse_int(size_text, "WORLD_SIZE")
+    except ValueError:
+        raise ValueError(
+            f"WORLD_SIZE={size_text!r} and RANK={rank_text!r} must be integers (torchrun sets them)"
+        ) from None
+
+
 def _run_fit_on_ranks(args: argparse.Namespace) -> int:
     """``eigview fit``, under ``torchrun --nproc-per-node N`` on every rank: the objects are
     split over the ranks (scale/ranks.py), rank 0 reports and writes the model, and each
     rank takes its share of the CPUs unless ``--threads`` says otherwise."""
-    from torch_eigview.apps.torchrun import torchrun_group
     from torch_eigview.scale.parallel import available_cpus
-    from torch_eigview.scale.ranks import world
+    from torch_eigview.scale.ranks import process_group
     from torch_eigview.scale.thread_policy import threads
 
-    with torchrun_group() as rank:
-        size = world()[1]
+    rank, size = ranks_from_environment()
+    with process_group(rank, size) as rank:
         args.quiet = args.quiet or rank > 0
         share = args.threads if args.threads is not None or size == 1 else max(1, available_cpus() // size)
         with threads(share):

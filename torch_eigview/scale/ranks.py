@@ -11,17 +11,21 @@ the objects' own order and every rank ends with the model one process would fit:
 up to rounding below ``max_rank``; past it one process and the ranks each drop their
 smallest eigenpairs at other merges, both within the reported truncation bound.
 
-``eigview fit`` starts the group itself under ``torchrun``
-(:func:`torch_eigview.apps.torchrun.torchrun_group`, which reads the environment).
+:func:`process_group` starts the default group for a given rank and world size (gloo;
+nccl for CUDA work) and ends it; ``eigview fit`` calls it with what torchrun put in its
+environment, which only the command reads.
 """
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+from datetime import timedelta
 from typing import Any
 
 import torch.distributed as dist
 
-__all__ = ["gather_in_rank_order", "object_shard", "world"]
+__all__ = ["gather_in_rank_order", "object_shard", "process_group", "world"]
 
 
 def world() -> tuple[int, int]:
@@ -77,3 +81,34 @@ def gather_in_rank_order(value: Any) -> list[Any]:
             f"rank {rank}: gathering the ranks' galleries failed, a peer rank left ({first})"
         ) from err
     return out
+
+
+@contextlib.contextmanager
+def process_group(rank: int, size: int, backend: str = "gloo", timeout_s: float = 1800.0) -> Iterator[int]:
+    """Starts the default process group as ``rank`` of ``size`` (the rendezvous from
+    ``MASTER_ADDR`` and ``MASTER_PORT``, torch's ``env://``) when ``size`` > 1 and none is
+    running, and ends it on exit; yields the rank (0 alone).
+
+    Args:
+        rank, size: this process's rank and the number of processes (torchrun's ``RANK``
+            and ``WORLD_SIZE``).
+        backend: ``"gloo"`` or ``"nccl"`` (CUDA tensors).
+        timeout_s: how long a collective waits for a rank that stalled or died.
+
+    Raises:
+        ValueError: a rank outside [0, size), or an unknown backend.
+    """
+    if backend not in ("gloo", "nccl"):
+        raise ValueError(f"backend must be 'gloo' or 'nccl', got {backend!r}")
+    if not 0 <= rank < max(size, 1):
+        raise ValueError(f"rank={rank} must lie in [0, size={size})")
+    if size <= 1 or (dist.is_available() and dist.is_initialized()):
+        yield world()[0]
+        return
+    if not dist.is_available():
+        raise RuntimeError(f"size={size} asks for torch.distributed, which this torch build lacks")
+    dist.init_process_group(backend, rank=rank, world_size=size, timeout=timedelta(seconds=timeout_s))
+    try:
+        yield rank
+    finally:
+        dist.destroy_process_group()
