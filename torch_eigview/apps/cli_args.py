@@ -20,6 +20,7 @@ __all__ = [
     "MIN_OPSET",
     "ArgumentParser",
     "HelpFormatter",
+    "add_kernel_arguments",
     "add_quiet",
     "add_threads",
     "angle_arg",
@@ -199,6 +200,23 @@ def objects_arg(text: str) -> list[int]:
 
 def gamma_arg(text: str) -> float | str:
     return word_or_float(text, "median", f"--gamma must be a number > 0 or 'median', got {text!r}")
+
+
+def add_kernel_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--kernel`` and ``--gamma``, as ``eigview coil`` and ``eigview fit`` take them."""
+    parser.add_argument(
+        "--kernel",
+        choices=("rbf", "poly", "cosine", "linear"),
+        default=None,
+        help="kernel PCA instead of the linear eigenspace",
+    )
+    parser.add_argument(
+        "--gamma",
+        type=gamma_arg,
+        default=None,
+        help="with --kernel rbf or poly: the kernel's gamma > 0, or 'median' (rbf: 1/median squared "
+        "distance); 1/N by default",
+    )
 
 
 def add_quiet(parser: argparse.ArgumentParser) -> None:

@@ -12,12 +12,12 @@ from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
     HelpFormatter,
+    add_kernel_arguments,
     add_quiet,
     add_threads,
     angle_arg,
     components_arg,
     elevation_arg,
-    gamma_arg,
     objects_arg,
     pose_step_arg,
     progress_bar,
@@ -142,18 +142,7 @@ def _add_method_arguments(coil: argparse.ArgumentParser) -> None:
     coil.add_argument(
         "--save", metavar="FILE", help="write the fitted model (for eigview evaluate, predict and export)"
     )
-    coil.add_argument(
-        "--kernel",
-        choices=("rbf", "poly", "cosine", "linear"),
-        default=None,
-        help="kernel PCA instead of the linear eigenspace",
-    )
-    coil.add_argument(
-        "--gamma",
-        type=gamma_arg,
-        default=None,
-        help="the kernel's gamma, or 'median' (rbf: 1/median squared distance); 1/N by default",
-    )
+    add_kernel_arguments(coil)
     coil.add_argument(
         "--device",
         choices=("cpu", "cuda"),

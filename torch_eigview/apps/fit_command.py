@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING
 
 from torch_eigview.apps.cli_args import (
     HelpFormatter,
+    add_kernel_arguments,
     add_quiet,
     add_threads,
     angle_arg,
     bounded_int_arg,
     components_arg,
-    gamma_arg,
     progress_bar,
 )
 from torch_eigview.apps.coil_command import add_synthesis_arguments, synthesis_options
@@ -115,19 +115,7 @@ def add_fit_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "-k", "--components", type=components_arg, default=15, help="k, or an energy fraction in (0, 1)"
     )
     add_synthesis_arguments(fit)
-    fit.add_argument(
-        "--kernel",
-        choices=("rbf", "poly", "cosine", "linear"),
-        default=None,
-        help="kernel PCA instead of the linear eigenspace (saved, exported and predicted as a linear one)",
-    )
-    fit.add_argument(
-        "--gamma",
-        type=gamma_arg,
-        default=None,
-        help="with --kernel rbf or poly: the kernel's gamma > 0, or 'median' (rbf: 1/median squared "
-        "distance); 1/N by default",
-    )
+    add_kernel_arguments(fit)
     fit.add_argument(
         "--degree",
         type=bounded_int_arg("--degree", 1),
