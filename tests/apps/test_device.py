@@ -12,6 +12,7 @@ import torch
 from torch_eigview.apps.device_option import device_arg, resolve_device
 from torch_eigview.io.checkpoint import load_recognizer
 
+from tests.apps.test_fit_evaluate import _fit_args
 from tests.helpers import rendered_turntable, run_cli
 
 SIDE = 32
@@ -25,26 +26,19 @@ def views(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return rendered_turntable(tmp_path_factory.mktemp("views"), AZIMUTHS, SIDE)
 
 
-def _fit(views: Path, out: Path, *extra: str) -> list[str]:
-    return [
-        "fit", "--manifest", str(views), "--seeds", "0", "10", "--synth", "-20", "20", "2",
-        "--quiet", *extra, "--out", str(out),
-    ]  # fmt: skip
-
-
 @pytest.fixture(scope="module")
 def model(views: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     from torch_eigview.apps.cli import main
 
     out = tmp_path_factory.mktemp("model") / "model.pt"
-    assert main(_fit(views, out, "--device", "cpu")) == 0
+    assert main(_fit_args(views, out, "--device", "cpu")) == 0
     return out
 
 
 def _commands(views: Path, model: Path, out: Path) -> dict[str, list[str]]:
     image = str(views.parent / "egg" / "0.png")
     return {
-        "fit": _fit(views, out),
+        "fit": _fit_args(views, out),
         "evaluate": ["evaluate", "--model", str(model), "--manifest", str(views)],
         "predict": ["predict", "--model", str(model), image],
     }
@@ -115,7 +109,7 @@ def test_cuda_fit_evaluate_predict_match_cpu(
     and answers, and the file loads on the CPU."""
     torch.backends.cuda.matmul.allow_tf32 = False
     cuda_model = tmp_path / "cuda.pt"
-    code, out, err = run_cli(_fit(views, cuda_model, "--device", "cuda"), capsys)
+    code, out, err = run_cli(_fit_args(views, cuda_model, "--device", "cuda"), capsys)
     assert code == 0, err
     on_cpu, _ = load_recognizer(model)
     on_cuda, _ = load_recognizer(cuda_model)
