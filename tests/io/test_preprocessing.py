@@ -90,3 +90,33 @@ def test_export_refuses_preprocessing_of_another_shape(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match="preprocessing must be a Preprocessing"):
         export_recognizer(rec, tmp_path / "m.onnx", preprocessing={"size": [8, 6]})  # type: ignore[arg-type]
     assert not (tmp_path / "m.onnx").exists()
+
+
+def test_inverted_alpha_refused_by_both_readers(tmp_path: Path) -> None:
+    """An alpha channel that marks the whole border as object (an inverted mask) is refused by
+    the torch reader (read_view) and the numpy one (prepare_file) alike, naming the file; one
+    that marks half of it is read with a warning."""
+    from torch_eigview.datasets import background_rule
+    from torch_eigview.io.preprocessing import Preprocessing, prepare_file
+
+    gray = np.zeros((16, 16), np.uint8)
+    gray[5:11, 5:11] = 200
+    inside = np.zeros((16, 16), bool)
+    inside[5:11, 5:11] = True
+    prep = Preprocessing((16, 16), 1, background="auto")
+
+    def write(name: str, alpha: np.ndarray) -> Path:
+        path = tmp_path / f"{name}.png"
+        rgba = np.dstack([gray, gray, gray, alpha.astype(np.uint8) * 255])
+        skimage.io.imsave(path, rgba, check_contrast=False)
+        return path
+
+    inverted = write("inverted", ~inside)
+    refused = r"alpha channel of .*inverted\.png marks 100% of the image border as object: is it inverted"
+    with pytest.raises(ValueError, match=refused):
+        prepare_file(inverted, prep)
+    with pytest.raises(ValueError, match=refused):
+        read_view(inverted, background=background_rule("auto"))
+    half = write("half", inside | (np.arange(16) < 8)[None, :])
+    with pytest.warns(UserWarning, match=r"alpha channel of .*half\.png marks \d+% of the image border"):
+        prepare_file(half, prep)

@@ -22,44 +22,20 @@ from torch.utils.data import Dataset
 from torch_eigview.check import SIDE_LIMIT, check_int, check_limit
 from torch_eigview.datasets.background import BackgroundModel
 from torch_eigview.datasets.manifest import ViewManifest
-from torch_eigview.io.foreground import LUMA_WEIGHTS, colour_in_channels
+from torch_eigview.io.foreground import LUMA_WEIGHTS, check_mask_border, colour_in_channels
 from torch_eigview.io.images import image_size, read_image, to_unit_float
 
 __all__ = [
     "ASPECT_TOLERANCE",
-    "MASK_BORDER_ERROR",
-    "MASK_BORDER_WARNING",
     "ViewDataset",
     "read_view",
     "warn_aspect_changes",
 ]
 
 
-# An object seen on a turntable sits inside the frame: a mask that marks most of the image
-# border as object is far more likely inverted (zero on the object) than right. Past
-# MASK_BORDER_ERROR of the border the mask is refused; past MASK_BORDER_WARNING it is used
-# with a warning (an object cut by the frame can reach the border, rarely half of it).
-MASK_BORDER_ERROR = 0.9
-MASK_BORDER_WARNING = 0.5
 # Resizing views whose aspect ratios differ by more than this (relative) squeezes some
 # objects and not others; a camera's own ratio, shared by all views, is harmless.
 ASPECT_TOLERANCE = 0.02
-
-
-def _check_mask_border(found: np.ndarray, what: str) -> None:
-    """Refuses (or warns about) a (1, H, W) mask that marks most of the image border as object."""
-    plane = found[0]
-    if min(plane.shape) < 3:
-        return
-    ring = np.concatenate([plane[0], plane[-1], plane[1:-1, 0], plane[1:-1, -1]])
-    frac = float(ring.mean())
-    hint = "is it inverted? non-zero pixels mark the object, zero pixels the background"
-    if frac >= MASK_BORDER_ERROR:
-        raise ValueError(f"{what} marks {frac:.0%} of the image border as object: {hint}")
-    if frac >= MASK_BORDER_WARNING:
-        warnings.warn(
-            f"{what} marks {frac:.0%} of the image border as object: {hint}", UserWarning, stacklevel=3
-        )
 
 
 def warn_aspect_changes(
@@ -258,10 +234,10 @@ def read_view(
                     f"mask {mask} has size (H, W)={found.shape[1:]}, its image {path} "
                     f"{colour.shape[1:]}: they must match"
                 )
-            _check_mask_border(found, f"mask {mask}")
+            check_mask_border(found[0], f"mask {mask}")
         elif alpha is not None:
             found = np.asarray(alpha > 0)
-            _check_mask_border(found, f"the alpha channel of {path}")
+            check_mask_border(found[0], f"the alpha channel of {path}")
         else:
             found = np.ones((1, *colour.shape[1:]), dtype=bool)
     except ValueError as exc:

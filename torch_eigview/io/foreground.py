@@ -18,6 +18,7 @@ linearly, computed in float64 from float32 distances.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -25,8 +26,11 @@ import numpy as np
 __all__ = [
     "LUMA",
     "LUMA_WEIGHTS",
+    "MASK_BORDER_ERROR",
+    "MASK_BORDER_WARNING",
     "Colour",
     "background_colours",
+    "check_mask_border",
     "clean_mask",
     "colour_in_channels",
     "estimate_foreground",
@@ -45,6 +49,31 @@ _MIN_COLOUR_SHARE = 0.05
 #: ITU-R BT.709 luma, the weights of skimage.color.rgb2gray (RGB to gray wherever views are read).
 LUMA_WEIGHTS = (0.2125, 0.7154, 0.0721)
 LUMA = np.array(LUMA_WEIGHTS, dtype=np.float32)
+
+
+# An object seen on a turntable sits inside the frame: a mask that marks most of the image
+# border as object is far more likely inverted (zero on the object) than right. Past
+# MASK_BORDER_ERROR of the border the mask is refused; past MASK_BORDER_WARNING it is used
+# with a warning (an object cut by the frame can reach the border, rarely half of it).
+MASK_BORDER_ERROR = 0.9
+MASK_BORDER_WARNING = 0.5
+
+
+def check_mask_border(mask: np.ndarray, what: str) -> None:
+    """Refuses (or warns about) an (H, W) mask that marks most of the image border as
+    object, naming ``what`` and the share: likely inverted (see :data:`MASK_BORDER_ERROR`)."""
+    plane = mask
+    if min(plane.shape) < 3:
+        return
+    ring = np.concatenate([plane[0], plane[-1], plane[1:-1, 0], plane[1:-1, -1]])
+    frac = float(ring.mean())
+    hint = "is it inverted? non-zero pixels mark the object, zero pixels the background"
+    if frac >= MASK_BORDER_ERROR:
+        raise ValueError(f"{what} marks {frac:.0%} of the image border as object: {hint}")
+    if frac >= MASK_BORDER_WARNING:
+        warnings.warn(
+            f"{what} marks {frac:.0%} of the image border as object: {hint}", UserWarning, stacklevel=4
+        )
 
 
 def colour_in_channels(colour: Sequence[float], channels: int) -> tuple[float, ...]:

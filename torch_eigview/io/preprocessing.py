@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from torch_eigview.io.foreground import LUMA, colour_in_channels, estimate_foreground
+from torch_eigview.io.foreground import LUMA, check_mask_border, colour_in_channels, estimate_foreground
 from torch_eigview.io.images import read_image, to_unit_float
 
 __all__ = ["BACKGROUNDS", "RESIZE_RULE", "Preprocessing", "prepare_array", "prepare_file"]
@@ -252,6 +252,8 @@ def prepare_file(path: str | os.PathLike[str], prep: Preprocessing) -> np.ndarra
     arr = read_image(path, keep_alpha=prep.background != "keep")
     mask = arr[-1] > 0 if arr.shape[0] in (2, 4) else None  # the alpha channel decides
     colour = arr[:-1] if mask is not None else arr
+    if mask is not None and not mask.all():  # an opaque alpha is no mask (prepare_array)
+        check_mask_border(mask, f"the alpha channel of {os.fspath(path)}")
     try:
         return prepare_array(to_unit_float(colour, np.float32), prep, mask)
     except ValueError as exc:
